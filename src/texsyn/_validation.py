@@ -1,0 +1,240 @@
+"""Checks of images, shapes, options and ranges, with messages that name the problem.
+
+Every user-facing entry point (the methods' ``fit``/``sample``, ``texsyn.synthesize``, the
+command line) validates through these helpers, so that a bad input always produces one
+``ValueError`` or ``TypeError`` whose message names the parameter, what is allowed and what
+was received.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+__all__ = [
+    "Range",
+    "OneOf",
+    "as_exemplar",
+    "check_output_shape",
+    "normalize_rng",
+    "memory_limit_bytes",
+]
+
+
+@dataclass(frozen=True)
+class Range:
+    """Allowed interval of a numeric hyperparameter, used in ``Annotated[...]`` signatures.
+
+    Parameters
+    ----------
+    low, high : float or None
+        Bounds; ``None`` means unbounded on that side.
+    low_open, high_open : bool
+        Whether the bound itself is excluded.
+    """
+
+    low: float | None = None
+    high: float | None = None
+    low_open: bool = False
+    high_open: bool = False
+
+    def contains(self, value: float) -> bool:
+        if self.low is not None and (value < self.low or (self.low_open and value == self.low)):
+            return False
+        if self.high is not None and (value > self.high or (self.high_open and value == self.high)):
+            return False
+        return True
+
+    def describe(self) -> str:
+        left = "(" if self.low_open else "["
+        right = ")" if self.high_open else "]"
+        low = "-inf" if self.low is None else _fmt(self.low)
+        high = "inf" if self.high is None else _fmt(self.high)
+        if self.low is None:
+            left = "("
+        if self.high is None:
+            right = ")"
+        return f"{left}{low}, {high}{right}"
+
+
+@dataclass(frozen=True)
+class OneOf:
+    """Allowed values of a categorical hyperparameter, used in ``Annotated[...]`` signatures."""
+
+    values: tuple
+
+    def contains(self, value: Any) -> bool:
+        return value in self.values
+
+    def describe(self) -> str:
+        return "{" + ", ".join(repr(v) if isinstance(v, str) else _fmt(v) for v in self.values) + "}"
+
+
+def _fmt(x: Any) -> str:
+    if isinstance(x, float) and x.is_integer() and abs(x) < 1e15:
+        return str(int(x)) if not isinstance(x, bool) else str(x)
+    return str(x)
+
+
+def as_exemplar(image: Any, *, name: str = "exemplar") -> np.ndarray:
+    """Validate an exemplar array and return it as float64 ``(H, W)`` or ``(H, W, C)``.
+
+    Accepts float arrays with values in [0, 1] and uint8/uint16 arrays (scaled to [0, 1]).
+    A fourth (alpha) channel is dropped with a warning; a single channel is squeezed.
+
+    Raises
+    ------
+    TypeError
+        If the input is not a numeric array.
+    ValueError
+        If its rank, size or values are not allowed (NaN, infinity, outside [0, 1]).
+    """
+    if isinstance(image, (str, os.PathLike)):
+        raise TypeError(
+            f"{name} must be an image array, got a path {str(image)!r}; "
+            "read it first with texsyn.io.read_image"
+        )
+    try:
+        arr = np.asarray(image)
+    except Exception as exc:  # pragma: no cover - exotic array-likes
+        raise TypeError(f"{name} must be an array of numbers, got {type(image).__name__}") from exc
+    if arr.dtype == bool:
+        arr = arr.astype(np.float64)
+    if arr.dtype == np.uint8:
+        arr = arr.astype(np.float64) / 255.0
+    elif arr.dtype == np.uint16:
+        arr = arr.astype(np.float64) / 65535.0
+    elif np.issubdtype(arr.dtype, np.floating):
+        arr = arr.astype(np.float64)
+    elif np.issubdtype(arr.dtype, np.integer):
+        raise TypeError(
+            f"{name} must be float in [0, 1], uint8 or uint16; got integer dtype {arr.dtype}"
+        )
+    else:
+        raise TypeError(f"{name} must be an array of numbers, got dtype {arr.dtype}")
+    if arr.ndim == 3 and arr.shape[2] in (2, 4):
+        if arr.shape[2] == 4 or arr.shape[2] == 2:
+            alpha = arr[..., -1]
+            if np.any(alpha < 1.0):
+                warnings.warn(
+                    f"{name} has a transparency channel; it is dropped (texsyn synthesises colour "
+                    "or grey only)",
+                    UserWarning,
+                    stacklevel=3,
+                )
+            arr = arr[..., :-1]
+    if arr.ndim == 3 and arr.shape[2] == 1:
+        arr = arr[..., 0]
+    if arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[2] != 3):
+        raise ValueError(
+            f"{name} must have shape (H, W) or (H, W, 3), got shape {tuple(arr.shape)}"
+        )
+    if arr.shape[0] < 2 or arr.shape[1] < 2:
+        raise ValueError(
+            f"{name} is {arr.shape[1]}x{arr.shape[0]} pixels; at least 2x2 is needed"
+        )
+    if not np.all(np.isfinite(arr)):
+        bad = int(np.count_nonzero(~np.isfinite(arr)))
+        raise ValueError(f"{name} contains {bad} NaN or infinite values; all values must be finite")
+    lo, hi = float(arr.min()), float(arr.max())
+    if lo < 0.0 or hi > 1.0:
+        raise ValueError(
+            f"{name} values must lie in [0, 1], got values in [{lo:.4g}, {hi:.4g}]"
+        )
+    return np.ascontiguousarray(arr)
+
+
+def memory_limit_bytes() -> int:
+    """Memory a single synthesis may plan to use.
+
+    ``TEXSYN_MEMORY_LIMIT`` (bytes, or with a ``K``/``M``/``G`` suffix) overrides the default,
+    which is half of the machine's physical memory.
+    """
+    env = os.environ.get("TEXSYN_MEMORY_LIMIT")
+    if env:
+        text = env.strip().upper()
+        scale = {"K": 2**10, "M": 2**20, "G": 2**30, "T": 2**40}.get(text[-1:], 1)
+        number = text[:-1] if text[-1:] in "KMGT" else text
+        try:
+            return int(float(number) * scale)
+        except ValueError:
+            raise ValueError(
+                f"TEXSYN_MEMORY_LIMIT must be a number of bytes such as 8G, got {env!r}"
+            ) from None
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") // 2)
+    except (ValueError, OSError, AttributeError):  # pragma: no cover - non-POSIX
+        return 8 * 2**30
+
+
+def _human_bytes(n: float) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if n < 1024 or unit == "PiB":
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1024
+    return f"{n:.1f} PiB"  # pragma: no cover
+
+
+def check_output_shape(
+    shape: Any, *, bytes_per_pixel: float, name: str = "shape"
+) -> tuple[int, int]:
+    """Validate a requested output shape ``(H, W)`` against the memory limit.
+
+    Parameters
+    ----------
+    shape : tuple of two positive ints
+        Requested output height and width.
+    bytes_per_pixel : float
+        The method's estimate of its working memory per output pixel.
+
+    Returns
+    -------
+    (int, int)
+    """
+    try:
+        dims = tuple(shape)
+    except TypeError:
+        raise TypeError(f"{name} must be a pair (height, width), got {shape!r}") from None
+    if len(dims) == 3:
+        dims = dims[:2]
+    if len(dims) != 2:
+        raise ValueError(f"{name} must be a pair (height, width), got {shape!r}")
+    out = []
+    for d in dims:
+        if isinstance(d, (bool, np.bool_)) or not isinstance(d, (int, np.integer)):
+            if isinstance(d, (float, np.floating)) and float(d).is_integer():
+                d = int(d)
+            else:
+                raise TypeError(f"{name} must hold integers, got {shape!r}")
+        if d < 1:
+            raise ValueError(f"{name} must hold sizes of at least 1 pixel, got {shape!r}")
+        out.append(int(d))
+    need = float(out[0]) * float(out[1]) * float(bytes_per_pixel)
+    limit = memory_limit_bytes()
+    if need > limit:
+        raise ValueError(
+            f"output of {out[1]}x{out[0]} pixels would need about {_human_bytes(need)} of "
+            f"memory, more than the {_human_bytes(limit)} allowed (set TEXSYN_MEMORY_LIMIT "
+            "to change it); request a smaller size"
+        )
+    return out[0], out[1]
+
+
+def normalize_rng(rng: Any) -> np.random.Generator:
+    """Return a ``numpy.random.Generator`` from ``None``, an int, a SeedSequence or a Generator."""
+    if isinstance(rng, np.random.Generator):
+        return rng
+    if rng is None or isinstance(rng, (int, np.integer, np.random.SeedSequence)):
+        if isinstance(rng, (int, np.integer)) and rng < 0:
+            raise ValueError(f"rng seed must be a non-negative integer, got {rng}")
+        return np.random.default_rng(rng)
+    if isinstance(rng, np.random.RandomState):
+        raise TypeError(
+            "rng must be None, an int or a numpy.random.Generator; the legacy RandomState is "
+            "not accepted (texsyn never uses global random state)"
+        )
+    raise TypeError(f"rng must be None, an int or a numpy.random.Generator, got {type(rng).__name__}")

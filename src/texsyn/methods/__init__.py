@@ -1,0 +1,47 @@
+"""Synthesis methods, one class each, and the registry that the front doors read."""
+
+from __future__ import annotations
+
+from ._base import ParamSpec, Progress, SynthesisResult, TextureSynthesizer
+from .efros_leung import EfrosLeung
+from .heeger_bergen import HeegerBergen
+from .quilting import Quilting
+from .random_phase import RandomPhase
+
+METHODS: dict[str, type[TextureSynthesizer]] = {
+    cls.name: cls for cls in (Quilting, EfrosLeung, HeegerBergen, RandomPhase)
+}
+
+__all__ = [
+    "METHODS",
+    "EfrosLeung",
+    "HeegerBergen",
+    "ParamSpec",
+    "Progress",
+    "Quilting",
+    "RandomPhase",
+    "SynthesisResult",
+    "TextureSynthesizer",
+    "get_method",
+    "make_method",
+]
+
+
+def get_method(name: str) -> type[TextureSynthesizer]:
+    """The method class registered under ``name``; a clear error for unknown names."""
+    if not isinstance(name, str) or name not in METHODS:
+        raise ValueError(f"unknown method {name!r}; choose one of: {', '.join(sorted(METHODS))}")
+    return METHODS[name]
+
+
+def make_method(name: str, **params) -> TextureSynthesizer:
+    """Construct a method by name, rejecting unknown parameters with the allowed list."""
+    cls = get_method(name)
+    specs = cls.param_specs()
+    unknown = sorted(set(params) - set(specs))
+    if unknown:
+        allowed = ", ".join(specs) if specs else "none"
+        raise ValueError(
+            f"unknown parameter {unknown[0]!r} for method {name!r}; allowed: {allowed}"
+        )
+    return cls(**params)

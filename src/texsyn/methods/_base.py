@@ -1,0 +1,320 @@
+"""The method contract: fit once, sample many (DESIGN.md, "Methods").
+
+Every method is a subclass of :class:`TextureSynthesizer`. Its ``__init__`` signature is the
+single place where hyperparameters, their defaults and their allowed ranges live:
+
+    def __init__(self, *, patch_size: Annotated[int, Range(2, 512)] = 32, ...)
+
+The command line, ``texsyn methods``, :meth:`get_params` and the report all read it.
+"""
+
+from __future__ import annotations
+
+import inspect
+import re
+import typing
+from dataclasses import dataclass
+from typing import Any, Callable, ClassVar
+
+import numpy as np
+
+from .._validation import OneOf, Range, as_exemplar, check_output_shape, normalize_rng
+
+__all__ = ["ParamSpec", "Progress", "SynthesisResult", "TextureSynthesizer"]
+
+
+@dataclass(frozen=True)
+class SynthesisResult:
+    """One synthesised texture and, for copy-based methods, where its pixels came from.
+
+    Attributes
+    ----------
+    image : ndarray of float32, shape (H, W) or (H, W, 3)
+        Values clipped to [0, 1]; same rank and channels as the exemplar.
+    source_map : ndarray of int32, shape (H, W, 2), or None
+        Exemplar ``(row, col)`` each output pixel was copied from; ``None`` for methods that
+        do not copy pixels.
+    """
+
+    image: np.ndarray
+    source_map: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class Progress:
+    """What a method reports to ``callback`` while it works.
+
+    Attributes
+    ----------
+    stage : str
+        Short name of the current stage (``"blocks"``, ``"iteration"``, ``"pixels"``...).
+    done, total : int
+        Work units finished so far and in all for this stage.
+    image : ndarray or None
+        An intermediate image, when the method has one worth showing.
+    """
+
+    stage: str
+    done: int
+    total: int
+    image: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """A hyperparameter as read from a method's ``__init__`` signature."""
+
+    name: str
+    type: type
+    default: Any
+    allowed: Range | OneOf | None
+    optional: bool
+    description: str
+
+    def describe_allowed(self) -> str:
+        parts = []
+        if self.allowed is not None:
+            parts.append(self.allowed.describe())
+        else:
+            parts.append(self.type.__name__)
+        if self.optional:
+            parts.append("or none")
+        return " ".join(parts)
+
+    def check(self, value: Any, method: str) -> Any:
+        """Validate (and lightly coerce, e.g. int to float) one value; return it."""
+        where = f"parameter {self.name!r} of method {method!r}"
+        if value is None:
+            if self.optional:
+                return None
+            raise ValueError(f"{where} must be {self.describe_allowed()}, got None")
+        kind = self.type
+        if kind is bool:
+            if not isinstance(value, (bool, np.bool_)):
+                raise TypeError(f"{where} must be true or false, got {value!r}")
+            value = bool(value)
+        elif kind is int:
+            if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+                if isinstance(value, (float, np.floating)) and float(value).is_integer():
+                    value = int(value)
+                else:
+                    raise TypeError(f"{where} must be an integer, got {value!r}")
+            value = int(value)
+        elif kind is float:
+            if isinstance(value, (bool, np.bool_)) or not isinstance(
+                value, (int, float, np.integer, np.floating)
+            ):
+                raise TypeError(f"{where} must be a number, got {value!r}")
+            value = float(value)
+            if not np.isfinite(value):
+                raise ValueError(f"{where} must be finite, got {value!r}")
+        elif kind is str:
+            if not isinstance(value, str):
+                raise TypeError(f"{where} must be a string, got {value!r}")
+        if self.allowed is not None and not self.allowed.contains(value):
+            raise ValueError(f"{where} must be in {self.allowed.describe()}, got {value!r}")
+        return value
+
+    def parse(self, text: str, method: str) -> Any:
+        """Convert a command-line string to this parameter's type, then :meth:`check` it."""
+        where = f"parameter {self.name!r} of method {method!r}"
+        low = text.strip().lower()
+        if self.optional and low in ("none", "auto", ""):
+            return None
+        try:
+            if self.type is bool:
+                if low in ("1", "true", "yes", "on"):
+                    value: Any = True
+                elif low in ("0", "false", "no", "off"):
+                    value = False
+                else:
+                    raise ValueError
+            elif self.type is int:
+                value = int(text)
+            elif self.type is float:
+                value = float(text)
+            else:
+                value = text
+        except ValueError:
+            raise ValueError(
+                f"{where} must be {self.describe_allowed()}, got {text!r}"
+            ) from None
+        return self.check(value, method)
+
+
+def _docstring_params(doc: str | None) -> dict[str, str]:
+    """First sentence of each entry of a numpydoc ``Parameters`` section."""
+    if not doc:
+        return {}
+    text = inspect.cleandoc(doc)
+    match = re.search(r"^Parameters\n-+\n(.*?)(?:\n\n[A-Z][A-Za-z ]+\n-+\n|\Z)", text, re.S | re.M)
+    if not match:
+        return {}
+    out: dict[str, str] = {}
+    name = None
+    lines: list[str] = []
+    for line in match.group(1).splitlines():
+        head = re.match(r"^(\w+)\s*:", line)
+        if head and not line.startswith(" "):
+            if name:
+                out[name] = " ".join(lines)
+            name, lines = head.group(1), []
+        elif name and line.strip():
+            lines.append(line.strip())
+    if name:
+        out[name] = " ".join(lines)
+    return {k: re.split(r"(?<=\.)\s(?=[A-Z])", v, maxsplit=1)[0] for k, v in out.items()}
+
+
+class TextureSynthesizer:
+    """Base class of every synthesis method.
+
+    Subclasses define ``name``, ``summary`` and ``reference``, a keyword-only ``__init__``
+    that stores its hyperparameters under the same names, ``_fit(exemplar)`` and
+    ``_sample(shape, rng, callback)``.
+    """
+
+    name: ClassVar[str] = ""
+    summary: ClassVar[str] = ""
+    reference: ClassVar[str] = ""
+    has_source_map: ClassVar[bool] = False
+    #: rough working memory per output pixel and channel, in bytes (for the size check)
+    bytes_per_pixel: ClassVar[float] = 256.0
+
+    # ------------------------------------------------------------------ parameters
+    @classmethod
+    def param_specs(cls) -> dict[str, ParamSpec]:
+        """The hyperparameters, read from the ``__init__`` signature and docstring."""
+        sig = inspect.signature(cls.__init__)
+        hints = typing.get_type_hints(cls.__init__, include_extras=True)
+        docs = _docstring_params(cls.__doc__)
+        specs = {}
+        for pname, param in sig.parameters.items():
+            if pname == "self" or param.kind in (param.VAR_KEYWORD, param.VAR_POSITIONAL):
+                continue
+            hint = hints.get(pname, type(param.default))
+            allowed = None
+            if typing.get_origin(hint) is typing.Annotated:
+                base, *extras = typing.get_args(hint)
+                allowed = next((e for e in extras if isinstance(e, (Range, OneOf))), None)
+            else:
+                base = hint
+            optional = False
+            args = typing.get_args(base)
+            if args and type(None) in args:
+                optional = True
+                base = next(a for a in args if a is not type(None))
+            specs[pname] = ParamSpec(
+                name=pname,
+                type=base,
+                default=param.default,
+                allowed=allowed,
+                optional=optional,
+                description=docs.get(pname, ""),
+            )
+        return specs
+
+    def get_params(self) -> dict[str, Any]:
+        """Current hyperparameters as a dict (scikit-learn style)."""
+        return {name: getattr(self, name) for name in self.param_specs()}
+
+    def _check_params(self) -> None:
+        for name, spec in self.param_specs().items():
+            setattr(self, name, spec.check(getattr(self, name), self.name))
+
+    def __repr__(self) -> str:
+        args = ", ".join(f"{k}={v!r}" for k, v in self.get_params().items())
+        return f"{type(self).__name__}({args})"
+
+    # ------------------------------------------------------------------ fit / sample
+    def min_exemplar_size(self) -> tuple[int, str]:
+        """Smallest exemplar side this configuration accepts, and why."""
+        return 2, "at least 2x2 pixels"
+
+    def fit(self, exemplar: np.ndarray) -> "TextureSynthesizer":
+        """Validate the exemplar and learn everything that depends only on it.
+
+        Parameters
+        ----------
+        exemplar : ndarray, shape (H, W) or (H, W, 3)
+            Float values in [0, 1] (uint8 and uint16 are scaled).
+
+        Returns
+        -------
+        self
+        """
+        self._check_params()
+        ex = as_exemplar(exemplar)
+        side, why = self.min_exemplar_size()
+        if min(ex.shape[:2]) < side:
+            raise ValueError(
+                f"exemplar of {ex.shape[1]}x{ex.shape[0]} pixels is too small for method "
+                f"{self.name!r}: {why}"
+            )
+        self.exemplar_ = ex
+        self._fit(ex)
+        return self
+
+    def _fit(self, exemplar: np.ndarray) -> None:  # pragma: no cover - trivial default
+        pass
+
+    def _require_fitted(self) -> np.ndarray:
+        ex = getattr(self, "exemplar_", None)
+        if ex is None:
+            raise RuntimeError(f"method {self.name!r} must be fitted with fit(exemplar) first")
+        return ex
+
+    def sample(
+        self,
+        shape: tuple[int, int] | None = None,
+        *,
+        rng: None | int | np.random.Generator = None,
+        callback: Callable[[Progress], None] | None = None,
+    ) -> np.ndarray:
+        """Draw one texture.
+
+        Parameters
+        ----------
+        shape : (int, int), optional
+            Output ``(height, width)``; twice the exemplar by default. Any size is allowed.
+        rng : None, int or numpy.random.Generator
+            Source of randomness; the same value gives the same texture.
+        callback : callable, optional
+            Called with :class:`Progress` records while the method works.
+
+        Returns
+        -------
+        ndarray of float32, values clipped to [0, 1], rank and channels of the exemplar.
+        """
+        return self.sample_with_map(shape, rng=rng, callback=callback).image
+
+    def sample_with_map(
+        self,
+        shape: tuple[int, int] | None = None,
+        *,
+        rng: None | int | np.random.Generator = None,
+        callback: Callable[[Progress], None] | None = None,
+    ) -> SynthesisResult:
+        """Like :meth:`sample`, but also return the source map of copy-based methods."""
+        ex = self._require_fitted()
+        if shape is None:
+            shape = (2 * ex.shape[0], 2 * ex.shape[1])
+        channels = 1 if ex.ndim == 2 else ex.shape[2]
+        out_shape = check_output_shape(shape, bytes_per_pixel=self.bytes_per_pixel * channels)
+        generator = normalize_rng(rng)
+        image, source = self._sample(out_shape, generator, callback)
+        image = np.asarray(image)
+        if image.ndim == 3 and ex.ndim == 2:
+            image = image[..., 0]
+        result = np.clip(image, 0.0, 1.0).astype(np.float32)
+        if source is not None:
+            source = np.asarray(source, dtype=np.int32)
+        return SynthesisResult(image=result, source_map=source)
+
+    def _sample(
+        self,
+        shape: tuple[int, int],
+        rng: np.random.Generator,
+        callback: Callable[[Progress], None] | None,
+    ) -> tuple[np.ndarray, np.ndarray | None]:  # pragma: no cover - abstract
+        raise NotImplementedError

@@ -1,0 +1,95 @@
+"""Efros-Leung non-parametric pixel sampling (Efros and Leung 1999)."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+import numpy as np
+
+from .._validation import Range
+from ..ops.nonparametric import grow_texture
+from ._base import Progress, TextureSynthesizer
+
+__all__ = ["EfrosLeung"]
+
+
+class EfrosLeung(TextureSynthesizer):
+    """Efros-Leung synthesis: grow the texture pixel by pixel from a central seed.
+
+    Every pixel is drawn from the exemplar pixels whose neighbourhood best matches its
+    already synthesised neighbourhood (Gaussian-weighted SSD, exhaustive exact search).
+    The search is batched into matrix products without changing the sequential result
+    (see :mod:`texsyn.ops.nonparametric`).
+
+    Parameters
+    ----------
+    window_size : int
+        Odd side of the square neighbourhood window.
+    epsilon : float
+        Candidates are the windows within ``(1 + epsilon)`` of the best distance.
+    max_error : float
+        Largest accepted distance per unit weight; it grows by 10 % after a pass that
+        fills nothing.
+    seed_size : int
+        Side of the random exemplar seed placed at the centre of the output.
+
+    References
+    ----------
+    A. Efros, T. Leung, "Texture synthesis by non-parametric sampling", ICCV 1999.
+    C. Aguerrebere, Y. Gousseau, G. Tartavel, "Exemplar-based texture synthesis: the
+    Efros-Leung algorithm", Image Processing On Line 3 (2013).
+
+    Notes
+    -----
+    Limitations (paper, section 4): slow, since every pixel searches the whole exemplar;
+    it may grow "garbage" or verbatim copies on some textures.
+    """
+
+    name = "efros_leung"
+    summary = "Efros-Leung pixel-by-pixel non-parametric sampling"
+    reference = "Efros, Leung, ICCV 1999"
+    has_source_map = True
+    bytes_per_pixel = 64.0
+
+    def __init__(
+        self,
+        *,
+        window_size: Annotated[int, Range(3, 101)] = 11,
+        epsilon: Annotated[float, Range(0.0, 10.0)] = 0.1,
+        max_error: Annotated[float, Range(0.0, None, low_open=True)] = 0.3,
+        seed_size: Annotated[int, Range(1, 64)] = 3,
+    ):
+        self.window_size = window_size
+        self.epsilon = epsilon
+        self.max_error = max_error
+        self.seed_size = seed_size
+
+    def _check_params(self) -> None:
+        super()._check_params()
+        if self.window_size % 2 == 0:
+            raise ValueError(
+                f"parameter 'window_size' of method 'efros_leung' must be odd, got {self.window_size}"
+            )
+
+    def min_exemplar_size(self):
+        side = max(self.window_size, self.seed_size)
+        return side, f"window_size={self.window_size} needs at least {side}x{side} pixels"
+
+    def _sample(self, shape, rng, callback):
+        report = None
+        if callback is not None:
+
+            def report(done: int, total: int) -> None:
+                callback(Progress("pixels", done, total))
+
+        values, source = grow_texture(
+            self.exemplar_,
+            shape,
+            window=self.window_size,
+            epsilon=self.epsilon,
+            max_error=self.max_error,
+            seed_size=self.seed_size,
+            rng=rng,
+            callback=report,
+        )
+        return values, source

@@ -1,0 +1,49 @@
+"""Stateless building blocks shared by every method (spec 00). Each exists once here."""
+
+from .color import ColorPCA, rgb_to_yuv, yuv_to_rgb
+from .fourier import periodic_smooth_decomposition
+from .histogram import (
+    hist_target,
+    match_histogram,
+    match_histogram_pca,
+    match_sorted,
+    transport_energy,
+)
+from .patches import as_channels, average_patches, extract_patches, overlap_add
+from .positions import position_colors
+from .pyramids import crop_to_multiple, gaussian_blur, gaussian_pyramid, zoom_in, zoom_out
+from .search import FFTPatchSearch, WeightedPatchBank, knn_patches, knn_select
+from .seams import boundary_cut_mask, cumulative_path_cost, min_path, overlap_error
+from .steerable import Pyramid, SteerablePyramid
+
+__all__ = [
+    "ColorPCA",
+    "FFTPatchSearch",
+    "Pyramid",
+    "SteerablePyramid",
+    "WeightedPatchBank",
+    "as_channels",
+    "average_patches",
+    "boundary_cut_mask",
+    "crop_to_multiple",
+    "cumulative_path_cost",
+    "extract_patches",
+    "gaussian_blur",
+    "gaussian_pyramid",
+    "hist_target",
+    "knn_patches",
+    "knn_select",
+    "match_histogram",
+    "match_histogram_pca",
+    "match_sorted",
+    "min_path",
+    "overlap_add",
+    "overlap_error",
+    "periodic_smooth_decomposition",
+    "position_colors",
+    "rgb_to_yuv",
+    "transport_energy",
+    "yuv_to_rgb",
+    "zoom_in",
+    "zoom_out",
+]

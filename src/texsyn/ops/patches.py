@@ -1,0 +1,114 @@
+"""Patch extraction and overlap re-assembly (spec 00, section 1)."""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+
+__all__ = ["as_channels", "extract_patches", "overlap_add", "average_patches"]
+
+
+def as_channels(image: np.ndarray) -> np.ndarray:
+    """View a ``(H, W)`` image as ``(H, W, 1)``; leave ``(H, W, C)`` unchanged."""
+    return image[..., None] if image.ndim == 2 else image
+
+
+def _anchors(size: int, n: int, stride: int, mode: str) -> np.ndarray:
+    if mode == "valid":
+        return np.arange(0, size - n + 1, stride)
+    if mode == "periodic":
+        return np.arange(0, size, stride)
+    raise ValueError(f"mode must be 'valid' or 'periodic', got {mode!r}")
+
+
+def extract_patches(
+    image: np.ndarray, n: int, *, stride: int = 1, mode: str = "valid"
+) -> tuple[np.ndarray, np.ndarray]:
+    """All ``n x n`` patches of an image as flat vectors, top-left anchored.
+
+    Parameters
+    ----------
+    image : ndarray, shape (H, W) or (H, W, C)
+    n : int
+        Patch side.
+    stride : int
+        Step between anchors.
+    mode : {'valid', 'periodic'}
+        ``'valid'`` keeps anchors whose patch lies inside the image (Raad's ``V_u``);
+        ``'periodic'`` takes every ``stride``-th anchor with indices wrapped modulo the size.
+
+    Returns
+    -------
+    patches : ndarray, shape (K, n*n*C)
+        Patch vectors flattened in C order of shape ``(n, n, C)``.
+    anchors : ndarray, shape (K, 2)
+        ``(row, col)`` of each patch's top-left pixel.
+    """
+    img = as_channels(np.asarray(image))
+    h, w, _ = img.shape
+    if mode == "periodic":
+        img = np.pad(img, ((0, n - 1), (0, n - 1), (0, 0)), mode="wrap")
+    elif n > h or n > w:
+        raise ValueError(f"patch size {n} is larger than the image ({w}x{h})")
+    rows = _anchors(h, n, stride, mode)
+    cols = _anchors(w, n, stride, mode)
+    windows = sliding_window_view(img, (n, n), axis=(0, 1))  # (h', w', C, n, n)
+    windows = windows[rows][:, cols]
+    patches = np.ascontiguousarray(windows.transpose(0, 1, 3, 4, 2)).reshape(
+        len(rows) * len(cols), -1
+    )
+    rr, cc = np.meshgrid(rows, cols, indexing="ij")
+    return patches, np.stack([rr.ravel(), cc.ravel()], axis=1)
+
+
+def overlap_add(
+    patches: np.ndarray,
+    anchors: np.ndarray,
+    shape: tuple[int, ...],
+    n: int,
+    *,
+    mode: str = "valid",
+) -> tuple[np.ndarray, np.ndarray]:
+    """Adjoint of :func:`extract_patches`: add every patch back at its anchor.
+
+    Returns
+    -------
+    image : ndarray, shape ``shape``
+        The sum of the patches covering each pixel.
+    coverage : ndarray, shape ``shape[:2]``
+        The number of patches covering each pixel (``rho`` in spec 00, section 1.2).
+    """
+    h, w = shape[:2]
+    c = shape[2] if len(shape) == 3 else 1
+    blocks = np.asarray(patches, dtype=np.float64).reshape(-1, n, n, c)
+    di, dj = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    rows = anchors[:, 0, None, None] + di
+    cols = anchors[:, 1, None, None] + dj
+    if mode == "periodic":
+        rows, cols = rows % h, cols % w
+    elif mode != "valid":
+        raise ValueError(f"mode must be 'valid' or 'periodic', got {mode!r}")
+    flat = (rows * w + cols).ravel()
+    out = np.zeros((h * w, c))
+    for ch in range(c):
+        out[:, ch] = np.bincount(flat, weights=blocks[..., ch].ravel(), minlength=h * w)
+    coverage = np.bincount(flat, minlength=h * w).reshape(h, w).astype(np.float64)
+    out = out.reshape(h, w, c)
+    return (out[..., 0] if len(shape) == 2 else out), coverage
+
+
+def average_patches(
+    patches: np.ndarray,
+    anchors: np.ndarray,
+    shape: tuple[int, ...],
+    n: int,
+    *,
+    mode: str = "valid",
+) -> np.ndarray:
+    """Least-squares re-assembly ``Pi^+(P) = Pi^*(P) / rho`` (spec 00, section 1.2).
+
+    Pixels covered by no patch are set to zero.
+    """
+    total, coverage = overlap_add(patches, anchors, shape, n, mode=mode)
+    cov = np.maximum(coverage, 1.0)
+    return total / (cov if total.ndim == 2 else cov[..., None])
