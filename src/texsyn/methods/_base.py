@@ -75,6 +75,8 @@ class ParamSpec:
         parts = []
         if self.allowed is not None:
             parts.append(self.allowed.describe())
+        elif self.type is bool:
+            parts.append("true or false")
         else:
             parts.append(self.type.__name__)
         if self.optional:
@@ -163,6 +165,7 @@ def _docstring_params(doc: str | None) -> dict[str, str]:
             lines.append(line.strip())
     if name:
         out[name] = " ".join(lines)
+    out = {k: v.replace("``", "") for k, v in out.items()}
     return {k: re.split(r"(?<=\.)\s(?=[A-Z])", v, maxsplit=1)[0] for k, v in out.items()}
 
 

@@ -189,6 +189,7 @@ def grow_texture(
         order = np.argsort(-np.rint(known[rows + r, cols + r] * window * window), kind="stable")
         rows, cols = rows[order], cols[order]
         batch_of, n_batches = schedule_batches(rows, cols, r, height, width, batch_cap)
+        uniforms = rng.random(rows.size)  # one draw per pixel, in list order
         by_batch = np.argsort(batch_of, kind="stable")
         bounds = np.searchsorted(batch_of[by_batch], np.arange(n_batches + 1))
         filled_now = 0
@@ -205,7 +206,7 @@ def grow_texture(
                 full_w.reshape(len(members), -1),
             )
             d /= norm[:, None]
-            choice, err = _pick_candidates(d, float(epsilon), rng.random(len(members)))
+            choice, err = _pick_candidates(d, float(epsilon), uniforms[members])
             ok = err <= threshold
             if not np.any(ok):
                 continue

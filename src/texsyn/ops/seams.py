@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-__all__ = ["cumulative_path_cost", "min_path", "boundary_cut_mask", "overlap_error"]
+__all__ = ["cumulative_path_cost", "min_path", "l_shaped_cut", "boundary_cut_mask", "overlap_error"]
 
 
 def overlap_error(old: np.ndarray, new: np.ndarray) -> np.ndarray:
@@ -50,6 +50,34 @@ def min_path(cost: np.ndarray) -> np.ndarray:
     return _trace(cum, 0, int(np.argmin(cum[0])), 1)
 
 
+def l_shaped_cut(
+    error: np.ndarray, left: int, top: int
+) -> tuple[int, int, np.ndarray, np.ndarray]:
+    """Minimum-error L-shaped cut: a vertical path in the left strip and a horizontal path
+    in the top strip that meet at a corner pixel (spec 00, 7.1).
+
+    Both cumulative costs are computed from the far ends (bottom row, rightmost column);
+    the corner ``(ci, cj)`` minimises ``E_v + E_h - e``.
+
+    Returns
+    -------
+    ci, cj : int
+        The corner pixel.
+    v_cols : ndarray
+        Column of the vertical path in rows ``ci .. h-1``.
+    h_rows : ndarray
+        Row of the horizontal path in columns ``cj .. w-1``.
+    """
+    e = np.asarray(error, dtype=np.float64)
+    cum_v = cumulative_path_cost(e[::-1, :left])[::-1]
+    cum_h = cumulative_path_cost(e[:top, ::-1].T)[::-1].T
+    corner = cum_v[:top, :left] + cum_h[:top, :left] - e[:top, :left]
+    ci, cj = np.unravel_index(int(np.argmin(corner)), corner.shape)
+    v_cols = _trace(cum_v, int(ci), int(cj), 1)
+    h_rows = _trace(cum_h.T, int(cj), int(ci), 1)
+    return int(ci), int(cj), v_cols, h_rows
+
+
 def boundary_cut_mask(error: np.ndarray, left: int, top: int) -> np.ndarray:
     """Which pixels of a new patch replace the existing content after the boundary cut.
 
@@ -88,15 +116,9 @@ def boundary_cut_mask(error: np.ndarray, left: int, top: int) -> np.ndarray:
         path = min_path(e[:top, :].T)
         take_new[:top, :] = (np.arange(top)[:, None] >= path[None, :])
         return take_new
-    # L-shaped overlap: cost-to-go towards the bottom (vertical strip) and the right (top strip)
-    cum_v = cumulative_path_cost(e[::-1, :left])[::-1]
-    cum_h = cumulative_path_cost(e[:top, ::-1].T)[::-1].T
-    corner = cum_v[:top, :left] + cum_h[:top, :left] - e[:top, :left]
-    ci, cj = np.unravel_index(int(np.argmin(corner)), corner.shape)
+    ci, cj, v_cols, h_rows = l_shaped_cut(e, left, top)
     marked = np.zeros((h, w), dtype=bool)
-    v_cols = _trace(cum_v, ci, cj, 1)
     marked[np.arange(ci, h), v_cols] = True
-    h_rows = _trace(cum_h.T, cj, ci, 1)
     marked[h_rows, np.arange(cj, w)] = True
     labels, _ = ndimage.label(~marked)
     reached = labels == labels[h - 1, w - 1] if not marked[h - 1, w - 1] else np.zeros_like(marked)

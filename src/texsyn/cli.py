@@ -1,0 +1,229 @@
+"""The ``texsyn`` command line. It only calls the public API; options come from the registry.
+
+Every error caused by the input (missing or unreadable file, bad size, unknown method or
+parameter, value out of range, output too large, output folder missing) prints one line
+``texsyn: error: ...`` on stderr and exits with status 2, without a traceback and without
+creating or overwriting any output file.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import click
+import numpy as np
+
+from . import __version__, data
+from .io import check_output_path, read_image, write_array, write_image
+from .methods import METHODS, Progress, get_method, make_method
+from .ops import position_colors
+
+EXIT_BAD_INPUT = 2
+
+
+class _ProgressBar:
+    """A rich progress bar on stderr that appears only once work has taken over a second."""
+
+    def __init__(self, label: str, enabled: bool, delay: float = 1.0):
+        self.label = label
+        self.enabled = enabled
+        self.delay = delay
+        self.start = time.monotonic()
+        self._bar = None
+        self._task = None
+
+    def __call__(self, progress: Progress) -> None:
+        if not self.enabled:
+            return
+        if self._bar is None:
+            if time.monotonic() - self.start < self.delay:
+                return
+            from rich.console import Console
+            from rich.progress import BarColumn, Progress as RichProgress, TextColumn, TimeElapsedColumn
+
+            self._bar = RichProgress(
+                TextColumn("{task.description}"),
+                BarColumn(),
+                TextColumn("{task.completed}/{task.total}"),
+                TimeElapsedColumn(),
+                console=Console(stderr=True),
+                transient=False,
+            )
+            self._bar.start()
+            self._task = self._bar.add_task(self.label, total=progress.total)
+        self._bar.update(
+            self._task,
+            completed=progress.done,
+            total=progress.total,
+            description=f"{self.label} ({progress.stage})",
+        )
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.stop()
+            self._bar = None
+
+
+def _parse_size(text: str) -> tuple[int, int]:
+    parts = text.lower().replace("×", "x").split("x")
+    try:
+        width, height = (int(p) for p in parts)
+    except ValueError:
+        raise click.BadParameter(f"size must look like WIDTHxHEIGHT (e.g. 256x256), got {text!r}") from None
+    if width < 1 or height < 1:
+        raise click.BadParameter(f"size must be at least 1x1, got {text!r}")
+    return height, width
+
+
+def _parse_params(method: str, items: tuple[str, ...]) -> dict:
+    specs = get_method(method).param_specs()
+    params = {}
+    for item in items:
+        if "=" not in item:
+            raise click.BadParameter(f"parameters are given as NAME=VALUE, got {item!r}")
+        name, value = item.split("=", 1)
+        name = name.strip()
+        if name not in specs:
+            allowed = ", ".join(specs) if specs else "none"
+            raise ValueError(f"unknown parameter {name!r} for method {method!r}; allowed: {allowed}")
+        params[name] = specs[name].parse(value, method)
+    return params
+
+
+def _load_exemplar(exemplar: str | None) -> tuple[np.ndarray, str]:
+    if exemplar is None:
+        return data.exemplar("brick"), "built-in brick"
+    if exemplar.startswith("builtin:"):
+        name = exemplar.split(":", 1)[1]
+        return data.exemplar(name), f"built-in {name}"
+    return read_image(exemplar), exemplar
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, "--version", prog_name="texsyn", message="%(prog)s %(version)s")
+def cli() -> None:
+    """Exemplar-based texture synthesis."""
+
+
+@cli.command()
+@click.argument("exemplar", required=False)
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Output image (.png, .jpg, .tif).")
+@click.option("-m", "--method", default="quilting", show_default=True, help="Synthesis method (see `texsyn methods`).")
+@click.option("--size", help="Output size WIDTHxHEIGHT [default: twice the exemplar].")
+@click.option("--scale", type=float, help="Output size as a multiple of the exemplar size.")
+@click.option("--seed", type=click.IntRange(min=0), help="Random seed; the same seed gives the same texture.")
+@click.option("-p", "--param", "params", multiple=True, metavar="NAME=VALUE", help="Method parameter (repeatable).")
+@click.option("--source-map", type=click.Path(dir_okay=False), help="Also write where each pixel came from (.npy array, or a .png/.tif position-colour picture).")
+@click.option("--bit-depth", type=click.Choice(["8", "16"]), default="8", show_default=True, help="Bits per sample of the output (16 for PNG/TIFF).")
+@click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
+def synth(exemplar, output, method, size, scale, seed, params, source_map, bit_depth, quiet):
+    """Synthesise a texture from EXEMPLAR (an image file, or builtin:brick|grass|gravel).
+
+    Without EXEMPLAR, the built-in brick texture is used.
+    """
+    if size is not None and scale is not None:
+        raise click.BadParameter("give either --size or --scale, not both")
+    get_method(method)
+    depth = int(bit_depth)
+    out_path = check_output_path(output, bit_depth=depth)
+    parameters = _parse_params(method, params)
+    synthesizer = make_method(method, **parameters)
+    map_path = None
+    if source_map is not None:
+        if not type(synthesizer).has_source_map:
+            with_maps = ", ".join(n for n, c in sorted(METHODS.items()) if c.has_source_map)
+            raise ValueError(f"method {method!r} does not copy pixels, so it has no source map; methods with one: {with_maps}")
+        suffix = Path(source_map).suffix.lower()
+        if suffix == ".npy":
+            map_path = check_output_path(source_map, formats={".npy": (8,)})
+        else:
+            map_path = check_output_path(source_map)
+    image, label = _load_exemplar(exemplar)
+    if size is not None:
+        shape = _parse_size(size)
+    elif scale is not None:
+        if not scale > 0:
+            raise click.BadParameter(f"--scale must be positive, got {scale}")
+        shape = (max(1, round(image.shape[0] * scale)), max(1, round(image.shape[1] * scale)))
+    else:
+        shape = (2 * image.shape[0], 2 * image.shape[1])
+    bar = _ProgressBar(f"{method}", enabled=not quiet)
+    try:
+        synthesizer.fit(image)
+        result = synthesizer.sample_with_map(shape, rng=seed, callback=bar)
+    finally:
+        bar.close()
+    write_image(out_path, result.image, bit_depth=depth)
+    if map_path is not None:
+        if map_path.suffix.lower() == ".npy":
+            write_array(map_path, result.source_map)
+        else:
+            write_image(map_path, position_colors(result.source_map, image.shape[:2]))
+    if not quiet:
+        h, w = result.image.shape[:2]
+        click.echo(f"wrote {out_path} ({w}x{h}, {method}, from {label})", err=True)
+
+
+@cli.command("methods")
+def list_methods() -> None:
+    """List the methods with their papers and parameters (defaults and allowed values)."""
+    for name in sorted(METHODS):
+        cls = METHODS[name]
+        click.echo(f"{name}: {cls.summary}")
+        click.echo(f"  paper: {cls.reference}")
+        click.echo(f"  source map: {'yes' if cls.has_source_map else 'no'}")
+        specs = cls.param_specs()
+        if not specs:
+            click.echo("  parameters: none")
+        else:
+            click.echo("  parameters:")
+            for spec in specs.values():
+                default = "none" if spec.default is None else spec.default
+                click.echo(
+                    f"    {spec.name} = {default}  ({spec.type.__name__}, allowed {spec.describe_allowed()})"
+                    + (f"  {spec.description}" if spec.description else "")
+                )
+        click.echo("")
+
+
+def _one_line(exc: BaseException) -> str:
+    text = str(exc).strip() or type(exc).__name__
+    if isinstance(exc, (FileNotFoundError, PermissionError, IsADirectoryError)) and exc.filename and not str(exc).startswith(("no such", "cannot")):
+        text = f"{exc.strerror or 'cannot access'}: '{exc.filename}'"
+    return " ".join(text.split())
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``texsyn`` console script."""
+
+    def show_warning(message, category, filename, lineno, file=None, line=None):
+        sys.stderr.write(f"texsyn: warning: {message}\n")
+
+    warnings.showwarning = show_warning
+    try:
+        code = cli.main(args=argv, prog_name="texsyn", standalone_mode=False)
+    except click.exceptions.Exit as exc:
+        return exc.exit_code
+    except click.exceptions.Abort:
+        sys.stderr.write("texsyn: interrupted\n")
+        return 130
+    except click.UsageError as exc:
+        sys.stderr.write(f"texsyn: error: {_one_line(exc) if not exc.message else ' '.join(exc.message.split())}\n")
+        return EXIT_BAD_INPUT
+    except click.ClickException as exc:
+        sys.stderr.write(f"texsyn: error: {' '.join(exc.format_message().split())}\n")
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        sys.stderr.write("texsyn: interrupted\n")
+        return 130
+    except (ValueError, TypeError, OSError, MemoryError) as exc:
+        sys.stderr.write(f"texsyn: error: {_one_line(exc)}\n")
+        return EXIT_BAD_INPUT
+    return code if isinstance(code, int) else 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

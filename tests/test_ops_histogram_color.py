@@ -1,0 +1,113 @@
+import numpy as np
+import pytest
+
+from texsyn.ops import (
+    ColorPCA,
+    hist_target,
+    match_histogram,
+    match_histogram_pca,
+    match_sorted,
+    periodic_smooth_decomposition,
+    rgb_to_yuv,
+    transport_energy,
+    yuv_to_rgb,
+)
+
+
+def test_match_histogram_gives_exactly_the_target_values_in_rank_order():
+    rng = np.random.default_rng(0)
+    x = rng.random((13, 9))
+    y = rng.standard_normal(117) ** 3
+    out = match_histogram(x, y)
+    np.testing.assert_array_equal(np.sort(out, axis=None), np.sort(y))
+    np.testing.assert_array_equal(np.argsort(out, axis=None), np.argsort(x, axis=None))
+
+
+def test_match_histogram_is_the_closest_permutation():
+    rng = np.random.default_rng(1)
+    x, y = rng.random(8), rng.random(8)
+    out = match_histogram(x, y)
+    best = min(np.sum((x - y[list(p)]) ** 2) for p in __import__("itertools").permutations(range(8)))
+    assert np.isclose(np.sum((x - out) ** 2), best)
+
+
+def test_ot_target_for_unequal_sizes():
+    rng = np.random.default_rng(2)
+    y = rng.random(50)
+    np.testing.assert_allclose(hist_target(150, y), np.repeat(np.sort(y), 3), atol=1e-14)
+    t = hist_target(37, y)
+    assert t.size == 37 and np.all(np.diff(t) >= -1e-15)
+    assert np.isclose(t.mean(), y.mean())  # the barycentric projection keeps the mean
+    # the OT target minimises the transport energy among monotone rearrangements
+    x = rng.random(37)
+    matched = match_sorted(x, t)
+    assert transport_energy(matched, y) <= transport_energy(match_sorted(x, hist_target(37, y, method="interp")), y) + 1e-12
+
+
+def test_transport_energy_equal_sizes_is_sorted_ssd():
+    rng = np.random.default_rng(3)
+    x, y = rng.random(20), rng.random(20)
+    assert np.isclose(transport_energy(x, y), np.sum((np.sort(x) - np.sort(y)) ** 2))
+
+
+def test_random_tie_breaking_spreads_equal_values():
+    x = np.zeros(1000)
+    y = np.arange(1000.0)
+    stable = match_sorted(x, y)
+    np.testing.assert_array_equal(stable, y)
+    shuffled = match_sorted(x, y, rng=np.random.default_rng(4))
+    np.testing.assert_array_equal(np.sort(shuffled), y)
+    assert not np.array_equal(shuffled, y)
+
+
+def test_pca_matching_matches_each_principal_axis():
+    rng = np.random.default_rng(5)
+    mix = np.array([[1.0, 0.5, 0.2], [0.0, 1.0, 0.3], [0.1, 0.0, 1.0]])
+    ref = rng.random((20, 20, 3)) @ mix
+    img = rng.random((20, 20, 3))
+    pca = ColorPCA(ref)
+    np.testing.assert_allclose(pca.axes.T @ pca.axes, np.eye(3), atol=1e-12)
+    out = match_histogram_pca(img, ref, pca=pca)
+    a, a0 = pca.forward(out).reshape(-1, 3), pca.forward(ref).reshape(-1, 3)
+    for c in range(3):
+        np.testing.assert_allclose(np.sort(a[:, c]), np.sort(a0[:, c]), atol=1e-12)
+    np.testing.assert_allclose(np.cov(out.reshape(-1, 3).T), np.cov(ref.reshape(-1, 3).T), atol=0.02)
+
+
+def test_yuv_round_trip_is_exact():
+    rgb = np.random.default_rng(6).random((8, 9, 3))
+    np.testing.assert_allclose(yuv_to_rgb(rgb_to_yuv(rgb)), rgb, atol=1e-14)
+    grey = np.full((2, 2, 3), 0.4)
+    np.testing.assert_allclose(rgb_to_yuv(grey)[..., 1:], 0.0, atol=1e-4)  # BT.601 rows sum to ~1e-5
+
+
+def periodic_laplacian(u):
+    return sum(np.roll(u, s, axis=a) for a in (0, 1) for s in (1, -1)) - 4 * u
+
+
+def interior_laplacian(u):
+    out = np.zeros_like(u)
+    for axis in (0, 1):
+        fwd = np.diff(u, axis=axis)
+        pad_lo = [(0, 0)] * u.ndim
+        pad_hi = [(0, 0)] * u.ndim
+        pad_lo[axis] = (1, 0)
+        pad_hi[axis] = (0, 1)
+        out += np.pad(fwd, pad_hi) - np.pad(fwd, pad_lo)
+    return out
+
+
+@pytest.mark.parametrize("shape", [(16, 20), (15, 11, 3)])
+def test_periodic_component_solves_moisans_equation(shape):
+    u = np.random.default_rng(7).random(shape)
+    p, s = periodic_smooth_decomposition(u)
+    np.testing.assert_allclose(p + s, u, atol=1e-14)
+    np.testing.assert_allclose(periodic_laplacian(p), interior_laplacian(u), atol=1e-10)
+    np.testing.assert_allclose(p.mean(axis=(0, 1)), u.mean(axis=(0, 1)), atol=1e-12)
+
+
+def test_periodic_component_of_a_periodic_smooth_image_is_close_to_itself():
+    yy, xx = np.mgrid[:32, :32]
+    u = 0.5 + 0.2 * np.sin(2 * np.pi * xx / 32) * np.cos(2 * np.pi * 2 * yy / 32)
+    p, s = periodic_smooth_decomposition(u)
+    assert np.abs(s).max() < 0.05

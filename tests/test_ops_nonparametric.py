@@ -1,0 +1,48 @@
+import numpy as np
+import pytest
+
+from texsyn.ops.nonparametric import grow_texture, schedule_batches
+
+
+def test_batched_growth_equals_one_pixel_at_a_time(colour_exemplar):
+    ex = colour_exemplar[:24, :24]
+    batched = grow_texture(ex, (21, 26), window=5, rng=np.random.default_rng(3))
+    sequential = grow_texture(ex, (21, 26), window=5, rng=np.random.default_rng(3), max_batch=1)
+    np.testing.assert_array_equal(batched[1], sequential[1])
+    np.testing.assert_array_equal(batched[0], sequential[0])
+
+
+def test_schedule_never_batches_interacting_pixels():
+    rng = np.random.default_rng(0)
+    rows = rng.integers(0, 30, 200)
+    cols = rng.integers(0, 30, 200)
+    radius = 2
+    batch_of, n_batches = schedule_batches(rows, cols, radius, 30, 30, 1000)
+    assert batch_of.min() == 0 and batch_of.max() == n_batches - 1
+    for i in range(200):
+        for j in range(i + 1, 200):
+            near = abs(rows[i] - rows[j]) <= radius and abs(cols[i] - cols[j]) <= radius
+            if near:
+                # an earlier pixel of the list is processed in an earlier batch
+                assert batch_of[i] < batch_of[j]
+
+
+def test_growth_fills_every_pixel_with_an_exemplar_value(grey_exemplar):
+    values, source = grow_texture(grey_exemplar, (30, 20), window=7, rng=np.random.default_rng(1))
+    assert source.min() >= 0
+    np.testing.assert_array_equal(values[..., 0], grey_exemplar[source[..., 0], source[..., 1]])
+
+
+def test_growth_works_on_any_channel_stack():
+    rng = np.random.default_rng(2)
+    stack = rng.random((16, 16, 12))
+    values, source = grow_texture(stack, (10, 10), window=3, rng=np.random.default_rng(0))
+    assert values.shape == (10, 10, 12)
+    np.testing.assert_array_equal(values, stack[source[..., 0], source[..., 1]])
+
+
+def test_max_error_threshold_grows_until_pixels_are_accepted(grey_exemplar):
+    values, source = grow_texture(
+        grey_exemplar, (12, 12), window=5, max_error=1e-9, rng=np.random.default_rng(0)
+    )
+    assert source.min() >= 0

@@ -1,0 +1,81 @@
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from texsyn.ops import (
+    SteerablePyramid,
+    gaussian_blur,
+    gaussian_pyramid,
+    zoom_in,
+    zoom_out,
+)
+
+
+def smooth_image(shape, seed=0):
+    rng = np.random.default_rng(seed)
+    return ndimage.gaussian_filter(rng.random(shape), sigma=(2, 2) + (0,) * (len(shape) - 2), mode="wrap")
+
+
+@pytest.mark.parametrize("shape", [(15, 21), (16, 20), (12, 14, 3)])
+def test_mirror_zoom_in_interpolates_every_image(shape):
+    u = np.random.default_rng(1).random(shape)
+    v = zoom_in(u)
+    assert v.shape[:2] == (2 * shape[0], 2 * shape[1])
+    np.testing.assert_allclose(v[::2, ::2], u, atol=1e-12)
+
+
+def test_periodic_zoom_in_interpolates_odd_sizes_and_band_limited_images():
+    u = np.random.default_rng(2).random((15, 13))
+    np.testing.assert_allclose(zoom_in(u, boundary="periodic")[::2, ::2], u, atol=1e-12)
+    even = np.random.default_rng(3).random((16, 12))
+    spec = np.fft.fft2(even)
+    spec[8, :] = 0
+    spec[:, 6] = 0
+    band_limited = np.real(np.fft.ifft2(spec))
+    np.testing.assert_allclose(zoom_in(band_limited, boundary="periodic")[::2, ::2], band_limited, atol=1e-12)
+
+
+def test_zoom_in_after_zoom_out_restores_a_smooth_image():
+    u = smooth_image((64, 64))
+    restored = zoom_in(zoom_out(u, 1.4, mode="periodic"), boundary="periodic")
+    target = gaussian_blur(u, 1.4, mode="periodic")
+    rel = np.linalg.norm(restored - target) / np.linalg.norm(target - target.mean())
+    assert rel < 5e-3
+
+
+def test_gaussian_blur_periodic_matches_spatial_wrap_and_keeps_channels_apart():
+    u = np.random.default_rng(4).random((32, 30, 3))
+    spatial = ndimage.gaussian_filter(u, sigma=(1.5, 1.5, 0), mode="wrap", truncate=8)
+    np.testing.assert_allclose(gaussian_blur(u, 1.5, mode="periodic"), spatial, atol=1e-5)
+    grey = gaussian_blur(u[..., 1], 1.5)
+    np.testing.assert_allclose(gaussian_blur(u, 1.5)[..., 1], grey, atol=1e-14)
+
+
+def test_gaussian_pyramid_sizes():
+    levels = gaussian_pyramid(np.zeros((40, 24)), 3)
+    assert [lv.shape for lv in levels] == [(40, 24), (20, 12), (10, 6)]
+
+
+@pytest.mark.parametrize("shape", [(64, 64), (67, 53), (33, 40, 3)])
+def test_steerable_pyramid_perfect_reconstruction(shape):
+    x = np.random.default_rng(5).random(shape)
+    pyr = SteerablePyramid(shape[:2], n_scales=4, n_orientations=4)
+    coeffs = pyr.forward(x)
+    assert len(coeffs.keys()) == 1 + 16 + 1
+    assert coeffs[0, 0].shape[:2] == shape[:2]
+    np.testing.assert_allclose(pyr.inverse(coeffs), x, atol=1e-10)
+
+
+def test_steerable_pyramid_bands_are_oriented():
+    n = 64
+    yy, xx = np.mgrid[:n, :n]
+    grating = np.cos(2 * np.pi * 8 * xx / n)  # varies along x: vertical stripes
+    coeffs = SteerablePyramid((n, n), 3, 4).forward(grating)
+    energies = [np.sum(coeffs[1, b] ** 2) for b in range(4)]
+    assert np.argmax(energies) == 0
+    assert energies[0] > 100 * energies[2]
+
+
+def test_steerable_pyramid_rejects_tiny_images():
+    with pytest.raises(ValueError, match="too small"):
+        SteerablePyramid((10, 40), n_scales=4)

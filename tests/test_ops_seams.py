@@ -1,0 +1,60 @@
+import itertools
+
+import numpy as np
+import pytest
+
+from texsyn.ops.seams import boundary_cut_mask, l_shaped_cut, min_path
+
+
+def all_paths(rows, cols, start_cols=None):
+    """Every top-to-bottom path moving at most one column per row."""
+    starts = range(cols) if start_cols is None else start_cols
+    paths = [[c] for c in starts]
+    for _ in range(rows - 1):
+        paths = [p + [c] for p in paths for c in (p[-1] - 1, p[-1], p[-1] + 1) if 0 <= c < cols]
+    return paths
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_vertical_cut_is_the_minimum_over_admissible_paths(seed):
+    e = np.random.default_rng(seed).random((6, 4))
+    path = min_path(e)
+    cost = e[np.arange(6), path].sum()
+    best = min(e[np.arange(6), p].sum() for p in all_paths(6, 4))
+    assert np.isclose(cost, best)
+    assert np.all(np.abs(np.diff(path)) <= 1)
+
+
+def test_vertical_and_horizontal_masks_split_along_the_path():
+    e = np.random.default_rng(9).random((8, 8))
+    mask = boundary_cut_mask(e, left=3, top=0)
+    path = min_path(e[:, :3])
+    for i in range(8):
+        assert not mask[i, : path[i]].any() and mask[i, path[i] :].all()
+    mask_h = boundary_cut_mask(e, left=0, top=3)
+    path_h = min_path(e[:3, :].T)
+    for j in range(8):
+        assert not mask_h[: path_h[j], j].any() and mask_h[path_h[j] :, j].all()
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_l_shaped_cut_is_the_minimum_pair_of_paths(seed):
+    n, o = 5, 2
+    e = np.random.default_rng(seed).random((n, n))
+    ci, cj, v_cols, h_rows = l_shaped_cut(e, o, o)
+    cost = e[np.arange(ci, n), v_cols].sum() + e[h_rows, np.arange(cj, n)].sum() - e[ci, cj]
+    best = np.inf
+    for a, b in itertools.product(range(o), range(o)):
+        down = min(e[np.arange(a, n), p].sum() for p in all_paths(n - a, o, [b]))
+        right = min(e[p, np.arange(b, n)].sum() for p in all_paths(n - b, o, [a]))
+        best = min(best, down + right - e[a, b])
+    assert np.isclose(cost, best)
+    mask = boundary_cut_mask(e, left=o, top=o)
+    # both paths take the new patch, the corner area before them keeps the old content
+    assert mask[np.arange(ci, n), v_cols].all() and mask[h_rows, np.arange(cj, n)].all()
+    assert not mask[:ci, :cj].any()
+    for i in range(max(ci, o), n):  # below the top strip: split by the vertical path
+        assert not mask[i, : v_cols[i - ci]].any() and mask[i, v_cols[i - ci] :].all()
+    for j in range(max(cj, o), n):  # right of the left strip: split by the horizontal path
+        assert not mask[: h_rows[j - cj], j].any() and mask[h_rows[j - cj] :, j].all()
+    assert mask[o:, o:].all()
