@@ -76,7 +76,7 @@ class OneOf:
 
 def _fmt(x: Any) -> str:
     if isinstance(x, float) and x.is_integer() and abs(x) < 1e15:
-        return str(int(x)) if not isinstance(x, bool) else str(x)
+        return str(int(x))
     return str(x)
 
 
@@ -117,16 +117,14 @@ def as_exemplar(image: Any, *, name: str = "exemplar") -> np.ndarray:
     else:
         raise TypeError(f"{name} must be an array of numbers, got dtype {arr.dtype}")
     if arr.ndim == 3 and arr.shape[2] in (2, 4):
-        if arr.shape[2] == 4 or arr.shape[2] == 2:
-            alpha = arr[..., -1]
-            if np.any(alpha < 1.0):
-                warnings.warn(
-                    f"{name} has a transparency channel; it is dropped (texsyn synthesises colour "
-                    "or grey only)",
-                    UserWarning,
-                    stacklevel=3,
-                )
-            arr = arr[..., :-1]
+        if np.any(arr[..., -1] < 1.0):
+            warnings.warn(
+                f"{name} has a transparency channel; it is dropped (texsyn synthesises colour "
+                "or grey only)",
+                UserWarning,
+                stacklevel=3,
+            )
+        arr = arr[..., :-1]
     if arr.ndim == 3 and arr.shape[2] == 1:
         arr = arr[..., 0]
     if arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[2] != 3):

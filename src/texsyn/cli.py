@@ -211,7 +211,7 @@ def main(argv: list[str] | None = None) -> int:
         sys.stderr.write("texsyn: interrupted\n")
         return 130
     except click.UsageError as exc:
-        sys.stderr.write(f"texsyn: error: {_one_line(exc) if not exc.message else ' '.join(exc.message.split())}\n")
+        sys.stderr.write(f"texsyn: error: {' '.join(exc.format_message().split())}\n")
         return EXIT_BAD_INPUT
     except click.ClickException as exc:
         sys.stderr.write(f"texsyn: error: {' '.join(exc.format_message().split())}\n")
