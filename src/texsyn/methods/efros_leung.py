@@ -7,7 +7,7 @@ from typing import Annotated
 import numpy as np
 
 from .._validation import Range
-from ..ops.nonparametric import grow_texture
+from ..ops.nonparametric import NonParametricSampler
 from ._base import Progress, TextureSynthesizer
 
 __all__ = ["EfrosLeung"]
@@ -75,6 +75,9 @@ class EfrosLeung(TextureSynthesizer):
         side = max(self.window_size, self.seed_size)
         return side, f"window_size={self.window_size} needs at least {side}x{side} pixels"
 
+    def _fit(self, exemplar: np.ndarray) -> None:
+        self.sampler_ = NonParametricSampler(exemplar, self.window_size)
+
     def _sample(self, shape, rng, callback):
         report = None
         if callback is not None:
@@ -82,10 +85,8 @@ class EfrosLeung(TextureSynthesizer):
             def report(done: int, total: int) -> None:
                 callback(Progress("pixels", done, total))
 
-        values, source = grow_texture(
-            self.exemplar_,
+        values, source = self.sampler_.grow(
             shape,
-            window=self.window_size,
             epsilon=self.epsilon,
             max_error=self.max_error,
             seed_size=self.seed_size,

@@ -32,7 +32,7 @@ from scipy import ndimage
 from .patches import as_channels, extract_patches
 from .search import WeightedPatchBank
 
-__all__ = ["grow_texture", "schedule_batches"]
+__all__ = ["NonParametricSampler", "grow_texture", "schedule_batches"]
 
 
 @numba.njit(cache=True)
@@ -104,6 +104,110 @@ def _pick_candidates(d, epsilon, uniforms):
     return choice, error
 
 
+class NonParametricSampler:
+    """Everything region growing needs from an exemplar, built once (in a method's ``fit``).
+
+    Parameters
+    ----------
+    exemplar : ndarray, shape (H0, W0) or (H0, W0, C)
+        Any stack of real channels; distances sum over channels.
+    window : int
+        Odd side ``w`` of the square neighbourhood.
+    """
+
+    def __init__(self, exemplar: np.ndarray, window: int = 11):
+        self.exemplar = as_channels(np.asarray(exemplar, dtype=np.float64))
+        self.window = int(window)
+        radius = self.window // 2
+        patches, anchors = extract_patches(self.exemplar, self.window)
+        self.centres = anchors + radius
+        self.bank = WeightedPatchBank(patches)
+        grid = np.arange(self.window) - radius
+        sigma = self.window / 6.4
+        self.gauss = np.exp(-(grid[:, None] ** 2 + grid[None, :] ** 2) / (2.0 * sigma**2))
+
+    def grow(
+        self,
+        shape: tuple[int, int],
+        *,
+        epsilon: float = 0.1,
+        max_error: float = 0.3,
+        seed_size: int = 3,
+        rng: np.random.Generator,
+        callback: Callable[[int, int], None] | None = None,
+        max_batch: int = 256,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Grow a texture pixel by pixel (Efros and Leung 1999); see :func:`grow_texture`."""
+        ex = self.exemplar
+        ex_h, ex_w, channels = ex.shape
+        height, width = shape
+        window = self.window
+        r = window // 2
+        bank, centres, gauss = self.bank, self.centres, self.gauss
+        batch_cap = int(max(8, min(max_batch, (1 << 23) // max(bank.size, 1))))
+        dy, dx = np.meshgrid(np.arange(window), np.arange(window), indexing="ij")
+
+        values = np.zeros((height + 2 * r, width + 2 * r, channels))
+        filled = np.zeros((height + 2 * r, width + 2 * r), dtype=bool)
+        source = np.full((height, width, 2), -1, dtype=np.int64)
+
+        s = int(min(seed_size, height, width, ex_h, ex_w))
+        si, sj = int(rng.integers(ex_h - s + 1)), int(rng.integers(ex_w - s + 1))
+        top, left = (height - s) // 2, (width - s) // 2
+        values[top + r : top + r + s, left + r : left + r + s] = ex[si : si + s, sj : sj + s]
+        filled[top + r : top + r + s, left + r : left + r + s] = True
+        seed_rows, seed_cols = np.meshgrid(np.arange(s), np.arange(s), indexing="ij")
+        source[top : top + s, left : left + s, 0] = seed_rows + si
+        source[top : top + s, left : left + s, 1] = seed_cols + sj
+
+        n_filled, total = s * s, height * width
+        threshold = float(max_error)
+        ring = np.ones((3, 3), dtype=bool)
+        while n_filled < total:
+            inner = filled[r : r + height, r : r + width]
+            frontier = ndimage.binary_dilation(inner, structure=ring) & ~inner
+            rows, cols = np.nonzero(frontier)
+            known = ndimage.uniform_filter(filled.astype(np.float64), size=window, mode="constant")
+            perm = rng.permutation(rows.size)
+            rows, cols = rows[perm], cols[perm]
+            order = np.argsort(-np.rint(known[rows + r, cols + r] * window * window), kind="stable")
+            rows, cols = rows[order], cols[order]
+            batch_of, n_batches = schedule_batches(rows, cols, r, height, width, batch_cap)
+            uniforms = rng.random(rows.size)  # one draw per pixel, in list order
+            by_batch = np.argsort(batch_of, kind="stable")
+            bounds = np.searchsorted(batch_of[by_batch], np.arange(n_batches + 1))
+            filled_now = 0
+            for b in range(n_batches):
+                members = by_batch[bounds[b] : bounds[b + 1]]
+                pr, pc = rows[members], cols[members]
+                win_r = pr[:, None, None] + dy
+                win_c = pc[:, None, None] + dx
+                weights = filled[win_r, win_c] * gauss
+                norm = weights.sum(axis=(1, 2))
+                full_w = np.broadcast_to(weights[..., None], weights.shape + (channels,))
+                d = bank.distances(
+                    values[win_r, win_c].reshape(len(members), -1),
+                    full_w.reshape(len(members), -1),
+                )
+                d /= norm[:, None]
+                choice, err = _pick_candidates(d, float(epsilon), uniforms[members])
+                ok = err <= threshold
+                if not np.any(ok):
+                    continue
+                pr, pc, choice = pr[ok], pc[ok], choice[ok]
+                src = centres[choice]
+                values[pr + r, pc + r] = ex[src[:, 0], src[:, 1]]
+                filled[pr + r, pc + r] = True
+                source[pr, pc] = src
+                filled_now += int(ok.sum())
+            n_filled += filled_now
+            if filled_now == 0:
+                threshold *= 1.1
+            if callback is not None:
+                callback(n_filled, total)
+        return values[r : r + height, r : r + width], source
+
+
 def grow_texture(
     exemplar: np.ndarray,
     shape: tuple[int, int],
@@ -117,6 +221,8 @@ def grow_texture(
     max_batch: int = 256,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Grow a texture pixel by pixel from an exemplar (Efros and Leung 1999).
+
+    One-call form of :class:`NonParametricSampler` (build it once when sampling many times).
 
     Parameters
     ----------
@@ -137,7 +243,7 @@ def grow_texture(
     callback : callable, optional
         Called as ``callback(filled, total)`` after every pass.
     max_batch : int
-        Most pixels searched in one matrix product.
+        Most pixels searched in one matrix product (the result does not depend on it).
 
     Returns
     -------
@@ -150,75 +256,12 @@ def grow_texture(
     ----------
     A. Efros, T. Leung, "Texture synthesis by non-parametric sampling", ICCV 1999.
     """
-    ex = as_channels(np.asarray(exemplar, dtype=np.float64))
-    ex_h, ex_w, channels = ex.shape
-    height, width = shape
-    r = window // 2
-    patches, anchors = extract_patches(ex, window)
-    centres = anchors + r
-    bank = WeightedPatchBank(patches)
-    batch_cap = int(max(8, min(max_batch, (1 << 23) // max(bank.size, 1))))
-
-    grid = np.arange(window) - r
-    gauss = np.exp(-(grid[:, None] ** 2 + grid[None, :] ** 2) / (2.0 * (window / 6.4) ** 2))
-    dy, dx = np.meshgrid(np.arange(window), np.arange(window), indexing="ij")
-
-    values = np.zeros((height + 2 * r, width + 2 * r, channels))
-    filled = np.zeros((height + 2 * r, width + 2 * r), dtype=bool)
-    source = np.full((height, width, 2), -1, dtype=np.int64)
-
-    s = int(min(seed_size, height, width, ex_h, ex_w))
-    si, sj = int(rng.integers(ex_h - s + 1)), int(rng.integers(ex_w - s + 1))
-    top, left = (height - s) // 2, (width - s) // 2
-    values[top + r : top + r + s, left + r : left + r + s] = ex[si : si + s, sj : sj + s]
-    filled[top + r : top + r + s, left + r : left + r + s] = True
-    seed_rows, seed_cols = np.meshgrid(np.arange(s), np.arange(s), indexing="ij")
-    source[top : top + s, left : left + s, 0] = seed_rows + si
-    source[top : top + s, left : left + s, 1] = seed_cols + sj
-
-    n_filled, total = s * s, height * width
-    threshold = float(max_error)
-    ring = np.ones((3, 3), dtype=bool)
-    while n_filled < total:
-        inner = filled[r : r + height, r : r + width]
-        frontier = ndimage.binary_dilation(inner, structure=ring) & ~inner
-        rows, cols = np.nonzero(frontier)
-        known = ndimage.uniform_filter(filled.astype(np.float64), size=window, mode="constant")
-        perm = rng.permutation(rows.size)
-        rows, cols = rows[perm], cols[perm]
-        order = np.argsort(-np.rint(known[rows + r, cols + r] * window * window), kind="stable")
-        rows, cols = rows[order], cols[order]
-        batch_of, n_batches = schedule_batches(rows, cols, r, height, width, batch_cap)
-        uniforms = rng.random(rows.size)  # one draw per pixel, in list order
-        by_batch = np.argsort(batch_of, kind="stable")
-        bounds = np.searchsorted(batch_of[by_batch], np.arange(n_batches + 1))
-        filled_now = 0
-        for b in range(n_batches):
-            members = by_batch[bounds[b] : bounds[b + 1]]
-            pr, pc = rows[members], cols[members]
-            win_r = pr[:, None, None] + dy
-            win_c = pc[:, None, None] + dx
-            weights = filled[win_r, win_c] * gauss
-            norm = weights.sum(axis=(1, 2))
-            full_w = np.broadcast_to(weights[..., None], weights.shape + (channels,))
-            d = bank.distances(
-                values[win_r, win_c].reshape(len(members), -1),
-                full_w.reshape(len(members), -1),
-            )
-            d /= norm[:, None]
-            choice, err = _pick_candidates(d, float(epsilon), uniforms[members])
-            ok = err <= threshold
-            if not np.any(ok):
-                continue
-            pr, pc, choice = pr[ok], pc[ok], choice[ok]
-            src = centres[choice]
-            values[pr + r, pc + r] = ex[src[:, 0], src[:, 1]]
-            filled[pr + r, pc + r] = True
-            source[pr, pc] = src
-            filled_now += int(ok.sum())
-        n_filled += filled_now
-        if filled_now == 0:
-            threshold *= 1.1
-        if callback is not None:
-            callback(n_filled, total)
-    return values[r : r + height, r : r + width], source
+    return NonParametricSampler(exemplar, window).grow(
+        shape,
+        epsilon=epsilon,
+        max_error=max_error,
+        seed_size=seed_size,
+        rng=rng,
+        callback=callback,
+        max_batch=max_batch,
+    )
