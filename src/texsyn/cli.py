@@ -167,6 +167,49 @@ def synth(exemplar, output, method, size, scale, seed, params, source_map, bit_d
         click.echo(f"wrote {out_path} ({w}x{h}, {method}, from {label})", err=True)
 
 
+@cli.command()
+@click.argument("exemplar", required=False)
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Report file (.html); a .json sidecar is written beside it.")
+@click.option("-m", "--method", "methods", multiple=True, help="Method to compare (repeatable; all methods by default).")
+@click.option("--seeds", type=click.IntRange(min=1, max=100), default=1, show_default=True, help="Syntheses per method (seeds 0..N-1).")
+@click.option("--size", help="Output size WIDTHxHEIGHT [default: twice the exemplar].")
+@click.option("-p", "--param", "params", multiple=True, metavar="METHOD.NAME=VALUE", help="Method parameter (repeatable).")
+@click.option("--overwrite", is_flag=True, help="Replace an existing report.")
+@click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
+def compare(exemplar, output, methods, seeds, size, params, overwrite, quiet):
+    """Run several methods on EXEMPLAR and write an HTML report with metrics and timings."""
+    from .report import run_comparison, write_report
+
+    names = list(dict.fromkeys(methods)) or sorted(METHODS)
+    for name in names:
+        get_method(name)
+    html_path = check_output_path(output, formats={".html": (8,), ".htm": (8,)})
+    if not overwrite:
+        for p in (html_path, html_path.with_suffix(".json")):
+            if p.exists():
+                raise FileExistsError(f"'{p}' already exists; use --overwrite to replace it")
+    overrides: dict[str, dict] = {}
+    for item in params:
+        key = item.split("=", 1)[0]
+        if "." not in key or "=" not in item:
+            raise click.BadParameter(f"parameters are given as METHOD.NAME=VALUE, got {item!r}")
+        method, rest = item.split(".", 1)
+        if method not in names:
+            raise ValueError(f"parameter {item!r} names method {method!r}, which is not compared")
+        overrides.setdefault(method, {}).update(_parse_params(method, (rest,)))
+    image, label = _load_exemplar(exemplar)
+    shape = _parse_size(size) if size is not None else None
+    bar = _ProgressBar("compare", enabled=not quiet, delay=0.0)
+    try:
+        report = run_comparison(image, names, seeds=seeds, shape=shape, exemplar_name=label, params=overrides, callback=bar)
+    finally:
+        bar.close()
+    html_out, json_out = write_report(report, html_path, overwrite=overwrite)
+    failed = [r.method for r in report.records if r.error]
+    if not quiet:
+        click.echo(f"wrote {html_out} and {json_out}" + (f"; failed: {', '.join(failed)}" if failed else ""), err=True)
+
+
 @cli.command("methods")
 def list_methods() -> None:
     """List the methods with their papers and parameters (defaults and allowed values)."""

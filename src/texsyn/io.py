@@ -23,6 +23,7 @@ __all__ = [
     "write_image",
     "write_array",
     "check_output_path",
+    "atomic_write",
 ]
 
 READ_FORMATS = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".gif", ".webp", ".pgm", ".ppm", ".pnm", ".pbm")
@@ -171,7 +172,8 @@ def check_output_path(path: str | os.PathLike, *, bit_depth: int = 8, formats=No
     return p
 
 
-def _atomic(path: Path, writer) -> None:
+def atomic_write(path: Path, writer) -> None:
+    """Call ``writer(temporary_path)`` in ``path``'s folder, then rename it to ``path``."""
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent or ".")
     os.close(fd)
     try:
@@ -232,7 +234,7 @@ def write_image(path: str | os.PathLike, image: np.ndarray, *, bit_depth: int = 
         kwargs = {"quality": 95} if suffix in (".jpg", ".jpeg") else {}
         iio.imwrite(tmp, data, extension=suffix, **kwargs)
 
-    _atomic(p, writer)
+    atomic_write(p, writer)
     return p
 
 
@@ -244,5 +246,5 @@ def write_array(path: str | os.PathLike, array: np.ndarray) -> Path:
         with open(tmp, "wb") as fh:
             np.save(fh, np.asarray(array))
 
-    _atomic(p, writer)
+    atomic_write(p, writer)
     return p

@@ -12,7 +12,7 @@ from .histogram import (
 from .patches import as_channels, average_patches, extract_patches, overlap_add
 from .positions import position_colors
 from .pyramids import crop_to_multiple, gaussian_blur, gaussian_pyramid, zoom_in, zoom_out
-from .search import FFTPatchSearch, WeightedPatchBank, knn_patches, knn_select
+from .search import FFTPatchSearch, WeightedPatchBank, knn_patches, knn_select, nearest_both_ways
 from .seams import boundary_cut_mask, cumulative_path_cost, min_path, overlap_error
 from .steerable import Pyramid, SteerablePyramid
 
@@ -37,6 +37,7 @@ __all__ = [
     "match_histogram_pca",
     "match_sorted",
     "min_path",
+    "nearest_both_ways",
     "overlap_add",
     "overlap_error",
     "periodic_smooth_decomposition",

@@ -12,6 +12,7 @@ clamped at zero (the terms nearly cancel for good matches).
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 from .patches import as_channels
@@ -21,6 +22,7 @@ __all__ = [
     "FFTPatchSearch",
     "WeightedPatchBank",
     "knn_patches",
+    "nearest_both_ways",
 ]
 
 
@@ -190,3 +192,61 @@ def knn_patches(
         idx[start : start + len(q)] = order
         dist[start : start + len(q)] = np.take_along_axis(d, order, axis=1)
     return idx, dist
+
+
+@numba.njit(cache=True)
+def _fold_minima(gram, query_norm, bank_norm, offset, q_idx, q_dist, b_idx, b_dist):
+    """One pass over a block of ``q . x`` products: row and column minima of the distances."""
+    n_rows, n_cols = gram.shape
+    for i in range(n_rows):
+        best = np.inf
+        arg = 0
+        qn = query_norm[i]
+        for j in range(n_cols):
+            d = qn + bank_norm[j] - 2.0 * gram[i, j]
+            if d < 0.0:
+                d = 0.0
+            if d < best:
+                best = d
+                arg = j
+            if d < b_dist[j]:
+                b_dist[j] = d
+                b_idx[j] = offset + i
+        q_idx[offset + i] = arg
+        q_dist[offset + i] = best
+
+
+def nearest_both_ways(
+    queries: np.ndarray, bank: np.ndarray, *, block: int = 512
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Exact nearest neighbours in both directions between two patch sets, in one pass.
+
+    The products ``Q X^T`` come from BLAS in blocks of queries; a compiled loop folds each
+    block into the row minima (nearest bank row of every query) and the running column
+    minima (nearest query of every bank row). Ties go to the lowest index.
+
+    Parameters
+    ----------
+    queries : ndarray, shape (Q, D)
+    bank : ndarray, shape (K, D)
+
+    Returns
+    -------
+    query_nearest : ndarray of intp, shape (Q,)
+    query_distance : ndarray, shape (Q,)
+        Squared distance from each query to its nearest bank row.
+    bank_nearest : ndarray of intp, shape (K,)
+    bank_distance : ndarray, shape (K,)
+    """
+    bank = np.ascontiguousarray(bank, dtype=np.float64)
+    queries = np.ascontiguousarray(queries, dtype=np.float64)
+    bank_norm = np.sum(bank * bank, axis=1)
+    query_norm = np.sum(queries * queries, axis=1)
+    q_idx = np.empty(queries.shape[0], dtype=np.int64)
+    q_dist = np.empty(queries.shape[0])
+    b_idx = np.zeros(bank.shape[0], dtype=np.int64)
+    b_dist = np.full(bank.shape[0], np.inf)
+    for start in range(0, queries.shape[0], block):
+        q = queries[start : start + block]
+        _fold_minima(q @ bank.T, query_norm[start : start + block], bank_norm, start, q_idx, q_dist, b_idx, b_dist)
+    return q_idx, q_dist, b_idx, b_dist
