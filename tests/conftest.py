@@ -31,6 +31,10 @@ FAST_PARAMS = {
     "efros_leung": {"window_size": 5},
     "heeger_bergen": {"n_scales": 2, "n_iterations": 2},
     "random_phase": {},
+    "lg": {"patch_size": 10, "n_neighbors": 8},
+    "clg": {"patch_size": 10, "n_neighbors": 8},
+    "rclg": {"patch_size": 10, "n_neighbors": 8},
+    "mslg": {"patch_size": 8, "n_neighbors": 8, "n_scales": 2},
 }
 
 

@@ -69,6 +69,19 @@ def test_fft_search_equals_brute_force(mode, channels):
         assert np.isclose(ref[i, j], v, atol=1e-10)
 
 
+def test_fft_search_with_per_channel_weights():
+    rng = np.random.default_rng(6)
+    ex = rng.random((14, 16, 4))
+    query = rng.random((5, 5, 4))
+    weights = rng.random((5, 5, 4)) * (rng.random((5, 5, 4)) > 0.4)
+    d = FFTPatchSearch(ex, (5, 5)).distances(query, weights)
+    ref = np.empty_like(d)
+    for i in range(d.shape[0]):
+        for j in range(d.shape[1]):
+            ref[i, j] = np.sum(weights * (ex[i : i + 5, j : j + 5] - query) ** 2)
+    np.testing.assert_allclose(d, ref, atol=1e-10)
+
+
 def test_fft_search_rejects_window_larger_than_exemplar():
     with pytest.raises(ValueError, match="larger than the exemplar"):
         FFTPatchSearch(np.zeros((8, 8)), (9, 3))

@@ -4,16 +4,21 @@ from __future__ import annotations
 
 from ._base import ParamSpec, Progress, SynthesisResult, TextureSynthesizer
 from .efros_leung import EfrosLeung
+from .gaussian import CLG, LG, MSLG, RCLG
 from .heeger_bergen import HeegerBergen
 from .quilting import Quilting
 from .random_phase import RandomPhase
 
 METHODS: dict[str, type[TextureSynthesizer]] = {
-    cls.name: cls for cls in (Quilting, EfrosLeung, HeegerBergen, RandomPhase)
+    cls.name: cls for cls in (Quilting, EfrosLeung, HeegerBergen, RandomPhase, LG, CLG, RCLG, MSLG)
 }
 
 __all__ = [
+    "CLG",
+    "LG",
     "METHODS",
+    "MSLG",
+    "RCLG",
     "EfrosLeung",
     "HeegerBergen",
     "ParamSpec",

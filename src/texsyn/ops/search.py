@@ -72,6 +72,8 @@ class FFTPatchSearch:
         self.mode = mode
         self._spectra = np.fft.rfft2(ex, axes=(0, 1))
         self._sq_spectrum = np.fft.rfft2(np.sum(ex * ex, axis=2))
+        self._sq_spectra = np.fft.rfft2(ex * ex, axes=(0, 1)) if ex.shape[2] > 1 else None
+        self.channels = ex.shape[2]
         self._energy_cache: dict[bytes, np.ndarray] = {}
 
     @property
@@ -90,8 +92,12 @@ class FFTPatchSearch:
         key = weights.tobytes()
         hit = self._energy_cache.get(key)
         if hit is None:
-            kern = np.fft.rfft2(weights, s=self.shape)
-            hit = self._correlate(self._sq_spectrum * np.conj(kern))
+            if weights.ndim == 2:
+                kern = np.fft.rfft2(weights, s=self.shape)
+                hit = self._correlate(self._sq_spectrum * np.conj(kern))
+            else:
+                kern = np.fft.rfft2(weights, s=self.shape, axes=(0, 1))
+                hit = self._correlate(np.sum(self._sq_spectra * np.conj(kern), axis=2))
             if len(self._energy_cache) > 64:
                 self._energy_cache.clear()
             self._energy_cache[key] = hit
@@ -104,8 +110,10 @@ class FFTPatchSearch:
         ----------
         query : ndarray, shape (h, w) or (h, w, C)
             Values outside the weight support are ignored.
-        weights : ndarray, shape (h, w), optional
-            Non-negative pixel weights (a 0/1 mask, a Gaussian, ...); all ones by default.
+        weights : ndarray, shape (h, w) or (h, w, C), optional
+            Non-negative pixel weights (a 0/1 mask, a Gaussian, ...), shared by the channels
+            or one per channel (e.g. two terms of different weight stacked as channels,
+            Raad et al. 2016 eq. 14); all ones by default.
 
         Returns
         -------
@@ -116,10 +124,14 @@ class FFTPatchSearch:
         if q.shape[:2] != self.window:
             raise ValueError(f"query window must be {self.window}, got {q.shape[:2]}")
         w = np.ones(self.window) if weights is None else np.asarray(weights, dtype=np.float64)
-        wq = np.where(w[..., None] > 0, w[..., None] * q, 0.0)
+        if w.ndim == 3 and self.channels == 1:
+            w = w[..., 0]
+        wc = w[..., None] if w.ndim == 2 else w
+        q = np.where(wc > 0, q, 0.0)  # unknown values outside the weights may be anything
+        wq = wc * q
         cross = np.fft.rfft2(wq, s=self.shape, axes=(0, 1))
         cross_term = self._correlate(np.sum(self._spectra * np.conj(cross), axis=2))
-        const = float(np.sum(w[..., None] * np.where(w[..., None] > 0, q, 0.0) ** 2))
+        const = float(np.sum(wq * q))
         d = self._energy(w) - 2.0 * cross_term + const
         return np.maximum(d, 0.0, out=d)
 
