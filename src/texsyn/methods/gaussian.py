@@ -191,7 +191,8 @@ class _LocalGaussianBase(TextureSynthesizer):
         return int(np.clip(round(self.overlap * self.patch_size), 1, self.patch_size - 1))
 
     def min_exemplar_size(self):
-        return self.patch_size, f"patch_size={self.patch_size} needs at least that many pixels per side"
+        side = self.patch_size + 1
+        return side, f"patch_size={self.patch_size} needs at least {side}x{side} pixels (two patches or more)"
 
     def _fit(self, exemplar: np.ndarray) -> None:
         ex = as_channels(exemplar)
