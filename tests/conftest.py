@@ -35,6 +35,7 @@ FAST_PARAMS = {
     "clg": {"patch_size": 10, "n_neighbors": 8},
     "rclg": {"patch_size": 10, "n_neighbors": 8},
     "mslg": {"patch_size": 8, "n_neighbors": 8, "n_scales": 2},
+    "sparse": {"patch_size": 6, "step": 3, "n_scales": 2, "n_atoms": 24, "ksvd_iterations": 2, "n_outer": 3, "n_inner": 3},
 }
 
 

@@ -8,13 +8,15 @@ from .gaussian import CLG, LG, MSLG, RCLG
 from .heeger_bergen import HeegerBergen
 from .quilting import Quilting
 from .random_phase import RandomPhase
+from .sparse import ConstrainedSparse
 
 METHODS: dict[str, type[TextureSynthesizer]] = {
-    cls.name: cls for cls in (Quilting, EfrosLeung, HeegerBergen, RandomPhase, LG, CLG, RCLG, MSLG)
+    cls.name: cls for cls in (Quilting, EfrosLeung, HeegerBergen, RandomPhase, LG, CLG, RCLG, MSLG, ConstrainedSparse)
 }
 
 __all__ = [
     "CLG",
+    "ConstrainedSparse",
     "LG",
     "METHODS",
     "MSLG",

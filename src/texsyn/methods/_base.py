@@ -52,12 +52,15 @@ class Progress:
         Work units finished so far and in all for this stage.
     image : ndarray or None
         An intermediate image, when the method has one worth showing.
+    info : dict or None
+        Method-specific diagnostics (codes, usage counts, energies...).
     """
 
     stage: str
     done: int
     total: int
     image: np.ndarray | None = None
+    info: dict | None = None
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,240 @@
+"""Sparse coding: batch orthogonal matching pursuit, K-SVD, constrained matching pursuit.
+
+Spec 04, sections 4 and 5.2. Matrices follow Tartavel et al. (2013): patches are columns,
+``P`` is ``(L, K)``, the dictionary ``D`` is ``(L, N)`` with unit-norm atoms, the codes
+``W`` are ``(N, K)``.
+"""
+
+from __future__ import annotations
+
+import heapq
+
+import numpy as np
+from scipy.sparse import csr_matrix
+
+__all__ = ["batch_omp", "ksvd", "constrained_matching_pursuit"]
+
+
+def batch_omp(
+    dictionary: np.ndarray,
+    signals: np.ndarray,
+    n_nonzero: int,
+    *,
+    gram: np.ndarray | None = None,
+) -> np.ndarray:
+    """Orthogonal matching pursuit of many signals at once (at most ``n_nonzero`` atoms each).
+
+    Each step picks, for every column, the atom most correlated with its residual, then
+    solves the normal equations of the selected atoms for all columns together (a stack of
+    ``s x s`` systems). Works in the Gram domain: ``D^T r = D^T x - G[:, support] coef``.
+
+    Parameters
+    ----------
+    dictionary : ndarray, shape (L, N)
+        Unit-norm atoms as columns.
+    signals : ndarray, shape (L, K)
+    n_nonzero : int
+        The exact l0 budget ``S`` of eq. (1).
+    gram : ndarray, shape (N, N), optional
+        ``D^T D`` if already computed.
+
+    Returns
+    -------
+    ndarray, shape (N, K)
+        Codes with at most ``n_nonzero`` non-zeros per column.
+
+    References
+    ----------
+    Y. Pati, R. Rezaiifar, P. Krishnaprasad, "Orthogonal matching pursuit", 1993;
+    R. Rubinstein, M. Zibulevsky, M. Elad, "Efficient implementation of the K-SVD algorithm
+    using batch orthogonal matching pursuit", Technion report CS-2008-08.
+    """
+    d = np.asarray(dictionary, dtype=np.float64)
+    x = np.asarray(signals, dtype=np.float64)
+    g = d.T @ d if gram is None else gram
+    n_atoms, n_signals = d.shape[1], x.shape[1]
+    xtd = x.T @ d  # (K, N): rows are contiguous for the per-signal argmax
+    corr = xtd.copy()
+    codes = np.zeros((n_signals, n_atoms))
+    support = np.zeros((n_signals, 0), dtype=np.int64)
+    rows = np.arange(n_signals)
+    active = np.ones(n_signals, dtype=bool)
+    floor = 1e-12 * np.sqrt(np.maximum(np.einsum("ij,ij->j", x, x), 1e-300))
+    for _ in range(min(n_nonzero, n_atoms)):
+        score = np.abs(corr)
+        if support.shape[1]:
+            score[rows[:, None], support] = -1.0  # never re-select an atom
+        pick = np.argmax(score, axis=1)
+        # signals already represented exactly stop growing (their residual is zero)
+        active &= score[rows, pick] > floor
+        if not active.any():
+            break
+        support = np.concatenate([support, pick[:, None]], axis=1)
+        idx = np.flatnonzero(active)
+        sup = support[idx]
+        sub_gram = g[sup[:, :, None], sup[:, None, :]]  # (k, s, s)
+        rhs = np.take_along_axis(xtd[idx], sup, axis=1)  # (k, s)
+        coef = np.linalg.solve(sub_gram, rhs[..., None])[..., 0]
+        codes[idx] = 0.0
+        codes[idx[:, None], sup] = coef
+        # D^T r = D^T x - G w with w sparse
+        sparse = csr_matrix((coef.ravel(), (np.repeat(np.arange(idx.size), sup.shape[1]), sup.ravel())), shape=(idx.size, n_atoms))
+        corr[idx] = xtd[idx] - sparse @ g
+    return np.ascontiguousarray(codes.T)
+
+
+def ksvd(
+    patches: np.ndarray,
+    n_atoms: int,
+    n_nonzero: int,
+    *,
+    n_iterations: int = 20,
+    max_training: int = 8000,
+    rng: np.random.Generator,
+) -> np.ndarray:
+    """Learn a dictionary with unit-norm atoms by K-SVD with exact S-sparse OMP coding.
+
+    Initialisation with ``n_atoms`` distinct random patches (normalised); each iteration
+    codes a fresh random subset of at most ``max_training`` patches with
+    :func:`batch_omp`, then updates every atom and its coefficients by the rank-one
+    approximation of its residual (one power step, "approximate K-SVD"), keeping the
+    residual up to date; an unused atom is replaced by the worst-approximated patch.
+
+    Parameters
+    ----------
+    patches : ndarray, shape (L, K0)
+    n_atoms : int
+    n_nonzero : int
+    n_iterations : int
+    max_training : int
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    ndarray, shape (L, n_atoms), unit-norm columns.
+
+    References
+    ----------
+    M. Aharon, M. Elad, A. Bruckstein, "K-SVD: an algorithm for designing overcomplete
+    dictionaries for sparse representation", IEEE TSP 54 (2006). Tartavel et al. (2013), eq. (1).
+    """
+    p = np.asarray(patches, dtype=np.float64)
+    n_dims, n_patches = p.shape
+    if n_patches < n_atoms:
+        raise ValueError(f"need at least {n_atoms} patches to learn {n_atoms} atoms, got {n_patches}")
+    start = rng.choice(n_patches, n_atoms, replace=False)
+    d = p[:, start].copy()
+    norms = np.linalg.norm(d, axis=0)
+    for j in np.flatnonzero(norms < 1e-12):
+        vec = rng.standard_normal(n_dims)
+        d[:, j] = vec
+        norms[j] = np.linalg.norm(vec)
+    d /= norms
+    for _ in range(n_iterations):
+        subset = rng.choice(n_patches, min(n_patches, max_training), replace=False)
+        x = p[:, subset]
+        w = batch_omp(d, x, n_nonzero)
+        residual = x - d @ w
+        for n in range(n_atoms):
+            users = np.flatnonzero(w[n])
+            if users.size == 0:
+                worst = int(np.argmax(np.einsum("ij,ij->j", residual, residual)))
+                vec = x[:, worst]
+                norm = np.linalg.norm(vec)
+                d[:, n] = vec / norm if norm > 1e-12 else d[:, n]
+                continue
+            err = residual[:, users] + np.outer(d[:, n], w[n, users])
+            atom = err @ w[n, users]
+            norm = np.linalg.norm(atom)
+            if norm < 1e-12:
+                continue
+            atom /= norm
+            coeffs = atom @ err
+            d[:, n] = atom
+            w[n, users] = coeffs
+            residual[:, users] = err - np.outer(atom, coeffs)
+    d /= np.maximum(np.linalg.norm(d, axis=0), 1e-300)
+    return d
+
+
+def constrained_matching_pursuit(
+    patches: np.ndarray,
+    dictionary: np.ndarray,
+    n_nonzero: int,
+    budget: np.ndarray | None = None,
+    *,
+    gram: np.ndarray | None = None,
+) -> np.ndarray:
+    """Matching pursuit with a per-patch sparsity ``S`` and a per-atom usage budget ``F``.
+
+    Global greedy pursuit (Tartavel et al. 2013, section 4.2, Algorithm 2, eqs. 10-12): at
+    each step the (patch, atom) pair of largest correlation among the available pairs is
+    selected, its coefficient increased by the correlation and that patch's correlations
+    updated through the Gram matrix. A pair is available when it is already used, or when
+    the patch has fewer than ``S`` atoms and the atom fewer than ``F[n]`` patches. One heap
+    entry per patch, validated when popped (atoms saturate meanwhile). ``S K`` steps.
+
+    Parameters
+    ----------
+    patches : ndarray, shape (L, K)
+    dictionary : ndarray, shape (L, N)
+        Unit-norm atoms.
+    n_nonzero : int
+        ``S``.
+    budget : ndarray of int, shape (N,), optional
+        ``F``; ``None`` means no per-atom constraint.
+
+    Returns
+    -------
+    ndarray, shape (N, K)
+    """
+    d = np.asarray(dictionary, dtype=np.float64)
+    g = d.T @ d if gram is None else gram
+    corr = d.T @ np.asarray(patches, dtype=np.float64)  # (N, K): <r_k, d_n>
+    n_atoms, n_patches = corr.shape
+    limit = np.full(n_atoms, np.iinfo(np.int64).max) if budget is None else np.asarray(budget, dtype=np.int64)
+    w = np.zeros((n_atoms, n_patches))
+    used = np.zeros((n_atoms, n_patches), dtype=bool)
+    per_patch = np.zeros(n_patches, dtype=np.int64)
+    per_atom = np.zeros(n_atoms, dtype=np.int64)
+
+    def best_atom(k: int) -> int:
+        if per_patch[k] < n_nonzero:
+            avail = used[:, k] | (per_atom < limit)
+        else:
+            avail = used[:, k]
+        if not avail.any():
+            return -1
+        score = np.where(avail, np.abs(corr[:, k]), -1.0)
+        return int(np.argmax(score))
+
+    heap = []
+    best = np.full(n_patches, -1, dtype=np.int64)
+    for k in range(n_patches):
+        best[k] = best_atom(k)
+        if best[k] >= 0:
+            heap.append((-abs(corr[best[k], k]), k))
+    heapq.heapify(heap)
+    steps = 0
+    while steps < n_nonzero * n_patches and heap:
+        key, k = heapq.heappop(heap)
+        n = int(best[k])
+        if not used[n, k] and (per_patch[k] >= n_nonzero or per_atom[n] >= limit[n]):
+            best[k] = best_atom(k)
+            if best[k] >= 0:
+                heapq.heappush(heap, (-abs(corr[best[k], k]), k))
+            continue
+        c = corr[n, k]
+        if abs(c) < 1e-12:
+            break
+        if not used[n, k]:
+            used[n, k] = True
+            per_patch[k] += 1
+            per_atom[n] += 1
+        w[n, k] += c
+        corr[:, k] -= c * g[:, n]
+        best[k] = best_atom(k)
+        if best[k] >= 0:
+            heapq.heappush(heap, (-abs(corr[best[k], k]), k))
+        steps += 1
+    return w

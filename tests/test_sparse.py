@@ -1,0 +1,228 @@
+"""Constrained sparse synthesis (Tartavel, Gousseau, Peyre 2013): building blocks and method."""
+
+import itertools
+
+import numpy as np
+import pytest
+
+import texsyn
+from texsyn.io import load_fitted, save_fitted
+from texsyn.methods.sparse import _HistogramProjector, _box_power, image_energy, image_update, upsample_bicubic
+from texsyn.ops import average_patches, extract_patches
+from texsyn.ops.graphcut import cut_value, graphcut_reassemble, kwatra_costs, seam_take_old
+from texsyn.ops.sparse import batch_omp, constrained_matching_pursuit, ksvd
+
+
+def unit_dictionary(rng, dim, n):
+    d = rng.standard_normal((dim, n))
+    return d / np.linalg.norm(d, axis=0)
+
+
+def test_batch_omp_equals_scikit_learn():
+    sklearn = pytest.importorskip("sklearn.linear_model")
+    rng = np.random.default_rng(0)
+    d = unit_dictionary(rng, 30, 50)
+    x = rng.standard_normal((30, 200))
+    w = batch_omp(d, x, 4)
+    ref = sklearn.orthogonal_mp_gram(d.T @ d, d.T @ x, n_nonzero_coefs=4)
+    np.testing.assert_allclose(w, ref, atol=1e-10)
+    assert np.count_nonzero(w, axis=0).max() <= 4
+
+
+def test_ksvd_learns_unit_atoms_that_code_better_than_its_start():
+    rng = np.random.default_rng(1)
+    truth = unit_dictionary(rng, 20, 15)
+    codes = np.zeros((15, 600))
+    for k in range(600):
+        codes[rng.choice(15, 2, replace=False), k] = rng.standard_normal(2)
+    x = truth @ codes
+    d = ksvd(x, 15, 2, n_iterations=15, max_training=600, rng=np.random.default_rng(2))
+    np.testing.assert_allclose(np.linalg.norm(d, axis=0), 1.0, atol=1e-12)
+    err = np.linalg.norm(x - d @ batch_omp(d, x, 2)) / np.linalg.norm(x)
+    start = x[:, np.random.default_rng(2).choice(600, 15, replace=False)]
+    start /= np.linalg.norm(start, axis=0)
+    err0 = np.linalg.norm(x - start @ batch_omp(start, x, 2)) / np.linalg.norm(x)
+    assert err < 0.5 * err0
+
+
+def naive_cmp(p, d, s, f):
+    """Constrained MP by exhaustive argmax over the available pairs (reference)."""
+    corr = d.T @ p
+    n, k = corr.shape
+    w = np.zeros((n, k))
+    g = d.T @ d
+    for _ in range(s * k):
+        used = w != 0
+        per_patch = used.sum(0)
+        per_atom = used.sum(1)
+        avail = used | ((per_patch[None, :] < s) & (per_atom[:, None] < f[:, None]))
+        if not avail.any():
+            break
+        score = np.where(avail, np.abs(corr), -1)
+        # ties between patches: the heap pops the lowest patch index first
+        best = score.max()
+        cols = np.flatnonzero((score == best).any(axis=0))
+        col = cols[0]
+        row = int(np.argmax(score[:, col]))
+        c = corr[row, col]
+        w[row, col] += c
+        corr[:, col] -= c * g[:, row]
+    return w
+
+
+def test_constrained_matching_pursuit_respects_both_constraints_and_matches_naive():
+    rng = np.random.default_rng(3)
+    d = unit_dictionary(rng, 12, 10)
+    p = rng.standard_normal((12, 15))
+    budget = rng.integers(1, 6, 10)
+    w = constrained_matching_pursuit(p, d, 3, budget)
+    assert np.count_nonzero(w, axis=0).max() <= 3
+    assert np.all(np.count_nonzero(w, axis=1) <= budget)
+    np.testing.assert_allclose(w, naive_cmp(p, d, 3, budget), atol=1e-12)
+
+
+def test_matching_pursuit_without_budget_on_one_patch_is_plain_mp():
+    rng = np.random.default_rng(4)
+    d = unit_dictionary(rng, 10, 8)
+    x = rng.standard_normal(10)
+    w = constrained_matching_pursuit(x[:, None], d, 3, None)[:, 0]
+    r, ref, energies = x.copy(), np.zeros(8), [x @ x]
+    for _ in range(3):
+        n = int(np.argmax(np.abs(d.T @ r)))
+        c = d[:, n] @ r
+        ref[n] += c
+        r = r - c * d[:, n]
+        energies.append(r @ r)
+        assert np.isclose(energies[-2] - energies[-1], c * c)  # energy drops by exactly c^2
+    np.testing.assert_allclose(w, ref, atol=1e-12)
+
+
+def test_linear_and_graphcut_reconstruction_of_true_patches_is_the_identity():
+    rng = np.random.default_rng(5)
+    u = rng.random((24, 36, 3))
+    patches, anchors = extract_patches(u, 6, stride=3, mode="periodic")
+    np.testing.assert_allclose(average_patches(patches, anchors, u.shape, 6, mode="periodic"), u, atol=1e-12)
+    grid = patches.reshape(8, 12, 6, 6, 3)
+    np.testing.assert_array_equal(graphcut_reassemble(grid, 3, (24, 36)), u)
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_graph_cut_seam_is_the_brute_force_minimum_cut(seed):
+    rng = np.random.default_rng(seed)
+    h, w = int(rng.integers(2, 5)), int(rng.integers(3, 6))
+    a, b = rng.random((h, w, 3)), rng.random((h, w, 3))
+    cost_h, cost_v = kwatra_costs(a, b)
+    keep = seam_take_old(a, b)
+    assert keep[:, 0].all() and not keep[:, -1].any()
+    free = [(r, c) for r in range(h) for c in range(1, w - 1)]
+    best = np.inf
+    for bits in itertools.product([False, True], repeat=len(free)):
+        lab = np.zeros((h, w), dtype=bool)
+        lab[:, 0] = True
+        for (r, c), bit in zip(free, bits):
+            lab[r, c] = bit
+        best = min(best, cut_value(lab, cost_h, cost_v))
+    assert np.isclose(cut_value(keep, cost_h, cost_v), best, rtol=1e-9, atol=1e-12)
+
+
+def test_graphcut_reconstruction_of_two_patches_is_the_minimum_cut_composite():
+    rng = np.random.default_rng(7)
+    a, b = rng.random((4, 5)), rng.random((4, 5))
+    keep = seam_take_old(a, b)
+    composite = np.where(keep, a, b)
+    cost_h, cost_v = kwatra_costs(a, b)
+    free = [(r, c) for r in range(4) for c in range(1, 4)]
+    values = []
+    for bits in itertools.product([False, True], repeat=len(free)):
+        lab = np.zeros((4, 5), dtype=bool)
+        lab[:, 0] = True
+        for (r, c), bit in zip(free, bits):
+            lab[r, c] = bit
+        values.append((cut_value(lab, cost_h, cost_v), lab))
+    best_value, best_lab = min(values, key=lambda v: v[0])
+    if sum(np.isclose(v, best_value) for v, _ in values) == 1:
+        np.testing.assert_array_equal(composite, np.where(best_lab, a, b))
+
+
+def test_image_update_decreases_the_energy_with_linear_reconstruction():
+    rng = np.random.default_rng(8)
+    ex = texsyn.data.exemplar("gravel", size=36).astype(np.float64)[..., None]
+    tau, step = 6, 3
+    d = ksvd(extract_patches(ex, tau)[0].T, 20, 3, n_iterations=2, rng=np.random.default_rng(0))
+    u = rng.random((24, 24, 1))
+    patches, anchors = extract_patches(u, tau, stride=step, mode="periodic")
+    coded = (d @ constrained_matching_pursuit(patches.T, d, 3, None)).T
+    recon = average_patches(coded, anchors, u.shape, tau, mode="periodic")
+    projector = _HistogramProjector([np.sort(ex, axis=None)], None, u.shape[0] * u.shape[1])
+    power = _box_power(u.shape[:2], tau)
+    ref = np.full(u.shape, ex.mean())
+    for beta in (0.0, 1.0):
+        energies = []
+        v = u.copy()
+        for _ in range(8):
+            energies.append(image_energy(v, coded, tau, step, projector, alpha=1.0, beta=beta, box_power=power, reference=ref))
+            v = image_update(v, recon, projector, alpha=1.0, beta=beta, box_power=power, reference=ref, n_steps=1, rng=None)
+        assert np.all(np.diff(energies) <= 1e-10 * energies[0])
+        assert energies[-1] < energies[0]
+
+
+def test_histogram_projection_gives_the_exemplar_values():
+    rng = np.random.default_rng(9)
+    ex = rng.random((10, 12))
+    proj = _HistogramProjector([np.sort(ex, axis=None)], None, 120)
+    out = proj(rng.random((10, 12, 1)), rng)
+    np.testing.assert_array_equal(np.sort(out, axis=None), np.sort(ex, axis=None))
+
+
+def test_bicubic_upsampling_interpolates_the_samples():
+    u = np.random.default_rng(10).random((8, 6, 2))
+    np.testing.assert_allclose(upsample_bicubic(u)[::2, ::2], u, atol=1e-12)
+
+
+SMALL = dict(patch_size=6, step=3, n_atoms=24, ksvd_iterations=3, n_outer=4, n_inner=4)
+
+
+def test_final_histogram_equals_the_exemplars_for_an_equal_size():
+    ex = texsyn.data.exemplar("brick", size=36)
+    out = texsyn.synthesize(ex, "sparse", ex.shape, rng=0, n_scales=2, **SMALL)
+    np.testing.assert_allclose(np.sort(out, axis=None), np.sort(ex, axis=None), atol=1e-7)
+
+
+def test_save_load_sample_is_identical(tmp_path):
+    ex = texsyn.data.exemplar("grass", size=32)
+    colour = np.stack([ex, ex[::-1], ex.T], axis=-1)
+    method = texsyn.make_method("sparse", n_scales=2, **SMALL).fit(colour)
+    path = save_fitted(tmp_path / "dict.npz", method)
+    loaded = load_fitted(path)
+    np.testing.assert_array_equal(loaded.sample((30, 30), rng=3), method.sample((30, 30), rng=3))
+    faster = load_fitted(path, n_outer=2)
+    assert faster.n_outer == 2
+    with pytest.raises(ValueError, match="patch_size"):
+        load_fitted(path, patch_size=8)
+
+
+def test_frequency_budget_follows_the_output_size_and_bounds_the_usage():
+    ex = texsyn.data.exemplar("brick", size=36)
+    method = texsyn.make_method("sparse", mode="frequency", **SMALL).fit(ex)
+    scale = method.scales_[0]
+    assert scale["usage"].sum() <= method.sparsity * scale["n_patches"]
+    budgets = {}
+    for shape in [(30, 30), (90, 60)]:
+        seen = []
+        method.sample(shape, rng=0, callback=seen.append)
+        info = seen[-1].info
+        expected = np.ceil(info["n_patches"] / scale["n_patches"] * scale["usage"]).astype(int)
+        np.testing.assert_array_equal(info["budget"], expected)
+        assert np.all(info["usage"] <= info["budget"])
+        assert info["usage"].sum() >= 0.9 * min(info["budget"].sum(), method.sparsity * info["n_patches"])
+        budgets[shape] = info["budget"]
+    assert budgets[(90, 60)].sum() > budgets[(30, 30)].sum()
+
+
+def test_too_small_exemplar_and_bad_steps_are_rejected():
+    with pytest.raises(ValueError, match="need at least"):
+        texsyn.make_method("sparse", patch_size=12, n_scales=3).fit(np.random.default_rng(0).random((52, 52)))
+    with pytest.raises(ValueError, match="divide"):
+        texsyn.make_method("sparse", patch_size=12, step=5).fit(np.zeros((64, 64)))
+    with pytest.raises(ValueError, match="at least patch_size/2"):
+        texsyn.make_method("sparse", patch_size=12, step=4).fit(np.zeros((64, 64)))
