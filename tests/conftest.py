@@ -35,6 +35,8 @@ FAST_PARAMS = {
     "clg": {"patch_size": 10, "n_neighbors": 8},
     "rclg": {"patch_size": 10, "n_neighbors": 8},
     "mslg": {"patch_size": 8, "n_neighbors": 8, "n_scales": 2},
+    "cwt": {"levels": 2, "seed": "random"},
+    "wei_levoy": {"levels": 2, "window": 5, "parent_window": 3},
     "sparse": {"patch_size": 6, "step": 3, "n_scales": 2, "n_atoms": 24, "ksvd_iterations": 2, "n_outer": 3, "n_inner": 3},
 }
 

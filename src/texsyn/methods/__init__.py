@@ -9,13 +9,16 @@ from .heeger_bergen import HeegerBergen
 from .quilting import Quilting
 from .random_phase import RandomPhase
 from .sparse import ConstrainedSparse
+from .wavelet_sampling import ComplexWaveletSampling
+from .wei_levoy import WeiLevoy
 
 METHODS: dict[str, type[TextureSynthesizer]] = {
-    cls.name: cls for cls in (Quilting, EfrosLeung, HeegerBergen, RandomPhase, LG, CLG, RCLG, MSLG, ConstrainedSparse)
+    cls.name: cls for cls in (Quilting, EfrosLeung, HeegerBergen, RandomPhase, LG, CLG, RCLG, MSLG, ConstrainedSparse, ComplexWaveletSampling, WeiLevoy)
 }
 
 __all__ = [
     "CLG",
+    "ComplexWaveletSampling",
     "ConstrainedSparse",
     "LG",
     "METHODS",
@@ -29,6 +32,7 @@ __all__ = [
     "RandomPhase",
     "SynthesisResult",
     "TextureSynthesizer",
+    "WeiLevoy",
     "get_method",
     "make_method",
 ]

@@ -184,6 +184,8 @@ class TextureSynthesizer:
     summary: ClassVar[str] = ""
     reference: ClassVar[str] = ""
     has_source_map: ClassVar[bool] = False
+    #: whether every output pixel equals the exemplar pixel its source map names
+    source_map_exact: ClassVar[bool] = True
     #: rough working memory per output pixel and channel, in bytes (for the size check)
     bytes_per_pixel: ClassVar[float] = 256.0
 

@@ -20,6 +20,7 @@ from .patches import (
     innovation,
     nearest_patch_field,
     patch_coherence,
+    source_map_regions,
     synthesis_map,
 )
 from .texture import (
@@ -45,6 +46,7 @@ __all__ = [
     "radial_log_spectrum",
     "sharpness_ratio",
     "spectrum_distance",
+    "source_map_regions",
     "synthesis_map",
 ]
 

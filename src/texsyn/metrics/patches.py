@@ -25,6 +25,7 @@ __all__ = [
     "copy_map",
     "innovation",
     "synthesis_map",
+    "source_map_regions",
 ]
 
 #: default patch side of the patch metrics
@@ -182,17 +183,7 @@ def copy_map(
     anchors = np.stack(np.mgrid[:ha, :wa], axis=-1)
     offsets = f.source - anchors
     copied = f.distance <= tolerance
-    index = np.arange(ha * wa).reshape(ha, wa)
-    same_r = copied[:, 1:] & copied[:, :-1] & np.all(offsets[:, 1:] == offsets[:, :-1], axis=2)
-    same_d = copied[1:, :] & copied[:-1, :] & np.all(offsets[1:, :] == offsets[:-1, :], axis=2)
-    src = np.concatenate([index[:, :-1][same_r], index[:-1, :][same_d]])
-    dst = np.concatenate([index[:, 1:][same_r], index[1:, :][same_d]])
-    graph = coo_matrix((np.ones(src.size), (src, dst)), shape=(ha * wa, ha * wa))
-    _, comp = connected_components(graph, directed=False)
-    labels = np.full(ha * wa, -1, dtype=np.int64)
-    flat_copied = copied.ravel()
-    _, labels[flat_copied] = np.unique(comp[flat_copied], return_inverse=True)
-    labels = labels.reshape(ha, wa)
+    labels = _constant_offset_regions(offsets, copied)
     n_regions = int(labels.max()) + 1
     h, w = f.image_shape
     if n_regions == 0:
@@ -214,6 +205,36 @@ def copy_map(
         largest=float(areas.max() / (h * w)),
         copied_share=float(copied_pixels / (h * w)),
     )
+
+
+def _constant_offset_regions(offsets: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """Label 4-connected regions of equal offset among ``valid`` positions (-1 elsewhere)."""
+    ha, wa = valid.shape
+    index = np.arange(ha * wa).reshape(ha, wa)
+    same_r = valid[:, 1:] & valid[:, :-1] & np.all(offsets[:, 1:] == offsets[:, :-1], axis=2)
+    same_d = valid[1:, :] & valid[:-1, :] & np.all(offsets[1:, :] == offsets[:-1, :], axis=2)
+    src = np.concatenate([index[:, :-1][same_r], index[:-1, :][same_d]])
+    dst = np.concatenate([index[:, 1:][same_r], index[1:, :][same_d]])
+    graph = coo_matrix((np.ones(src.size), (src, dst)), shape=(ha * wa, ha * wa))
+    _, comp = connected_components(graph, directed=False)
+    labels = np.full(ha * wa, -1, dtype=np.int64)
+    flat_valid = valid.ravel()
+    _, labels[flat_valid] = np.unique(comp[flat_valid], return_inverse=True)
+    return labels.reshape(ha, wa)
+
+
+def source_map_regions(source_map: np.ndarray) -> tuple[np.ndarray, float]:
+    """Regions copied in one piece according to a method's own source map.
+
+    Pixels are in one region when they are 4-connected and their sources sit at the same
+    offset (source minus position). Returns the labels and the largest region's share of
+    the output area.
+    """
+    src = np.asarray(source_map)
+    h, w = src.shape[:2]
+    offsets = src - np.stack(np.mgrid[:h, :w], axis=-1)
+    labels = _constant_offset_regions(offsets, np.ones((h, w), dtype=bool))
+    return labels, float(np.bincount(labels.ravel()).max() / (h * w))
 
 
 def innovation(image=None, exemplar=None, **kwargs) -> dict:

@@ -133,11 +133,17 @@ class NonParametricSampler:
         epsilon: float = 0.1,
         max_error: float = 0.3,
         seed_size: int = 3,
+        seed_block: tuple[int, int, int, int] | None = None,
         rng: np.random.Generator,
         callback: Callable[[int, int], None] | None = None,
         max_batch: int = 256,
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Grow a texture pixel by pixel (Efros and Leung 1999); see :func:`grow_texture`."""
+        """Grow a texture pixel by pixel (Efros and Leung 1999); see :func:`grow_texture`.
+
+        ``seed_block=(row, col, height, width)`` seeds the growth with that block of the
+        exemplar (cropped, centred, when larger than the output) instead of a random
+        ``seed_size`` square.
+        """
         ex = self.exemplar
         ex_h, ex_w, channels = ex.shape
         height, width = shape
@@ -151,16 +157,23 @@ class NonParametricSampler:
         filled = np.zeros((height + 2 * r, width + 2 * r), dtype=bool)
         source = np.full((height, width, 2), -1, dtype=np.int64)
 
-        s = int(min(seed_size, height, width, ex_h, ex_w))
-        si, sj = int(rng.integers(ex_h - s + 1)), int(rng.integers(ex_w - s + 1))
-        top, left = (height - s) // 2, (width - s) // 2
-        values[top + r : top + r + s, left + r : left + r + s] = ex[si : si + s, sj : sj + s]
-        filled[top + r : top + r + s, left + r : left + r + s] = True
-        seed_rows, seed_cols = np.meshgrid(np.arange(s), np.arange(s), indexing="ij")
-        source[top : top + s, left : left + s, 0] = seed_rows + si
-        source[top : top + s, left : left + s, 1] = seed_cols + sj
+        if seed_block is None:
+            sh = sw = int(min(seed_size, height, width, ex_h, ex_w))
+            si, sj = int(rng.integers(ex_h - sh + 1)), int(rng.integers(ex_w - sw + 1))
+        else:
+            si, sj, sh, sw = (int(v) for v in seed_block)
+            if sh > height:
+                si, sh = si + (sh - height) // 2, height
+            if sw > width:
+                sj, sw = sj + (sw - width) // 2, width
+        top, left = (height - sh) // 2, (width - sw) // 2
+        values[top + r : top + r + sh, left + r : left + r + sw] = ex[si : si + sh, sj : sj + sw]
+        filled[top + r : top + r + sh, left + r : left + r + sw] = True
+        seed_rows, seed_cols = np.meshgrid(np.arange(sh), np.arange(sw), indexing="ij")
+        source[top : top + sh, left : left + sw, 0] = seed_rows + si
+        source[top : top + sh, left : left + sw, 1] = seed_cols + sj
 
-        n_filled, total = s * s, height * width
+        n_filled, total = sh * sw, height * width
         threshold = float(max_error)
         ring = np.ones((3, 3), dtype=bool)
         while n_filled < total:
