@@ -45,6 +45,9 @@ TARGETS = {
     ("lg", "colour", 256): 5.0,
     ("clg", "colour", 256): 10.0,
     ("rclg", "colour", 256): 10.0,
+    ("cwt", "grey", 256): 2.0,
+    ("cwt", "colour", 256): 3.0,
+    ("sparse", "colour", 256): 60.0,
 }
 
 

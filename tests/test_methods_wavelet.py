@@ -126,3 +126,9 @@ def test_bad_parameters():
         texsyn.make_method("wei_levoy", window=4).fit(ex)
     with pytest.raises(ValueError, match="too small"):
         texsyn.make_method("cwt", levels=4).fit(ex[:20, :20])
+
+
+def test_wei_levoy_handles_tiny_coarse_levels():
+    ex = texsyn.data.exemplar("gravel", size=64)
+    out = texsyn.make_method("wei_levoy").fit(ex).sample((24, 24), rng=0)  # coarsest level 3x3
+    assert out.shape == (24, 24)

@@ -207,6 +207,8 @@ class WeiLevoy(TextureSynthesizer):
                 xs = t - slope * ys_all
                 ok = (xs >= 0) & (xs < w)
                 ys, xs = ys_all[ok], xs[ok]
+                if ys.size == 0:
+                    continue
                 q = _gather(out, ys, xs, self.causal_)
                 if parent is not None:
                     q = np.concatenate([q, _gather(parent, ys // 2, xs // 2, self.parent_)], axis=1)
