@@ -239,4 +239,5 @@ def test_bad_parameters(name, params, match):
 def test_too_many_neighbours_are_clamped_with_a_warning():
     ex = texsyn.data.exemplar("brick", size=14)
     with pytest.warns(UserWarning, match="n_neighbors"):
-        texsyn.make_method("lg", patch_size=10, n_neighbors=100).fit(ex).sample((20, 20), rng=0)
+        out = texsyn.make_method("lg", patch_size=10, n_neighbors=100).fit(ex).sample((20, 20), rng=0)
+    assert out.shape == (20, 20)
