@@ -7,8 +7,8 @@ import pytest
 
 import texsyn
 from texsyn.io import load_fitted, save_fitted
-from texsyn.methods.sparse import _HistogramProjector, _box_power, image_energy, image_update, upsample_bicubic
-from texsyn.ops import average_patches, extract_patches
+from texsyn.methods.sparse import _box_power, image_energy, image_update, upsample_bicubic
+from texsyn.ops import HistogramMatcher, average_patches, extract_patches
 from texsyn.ops.graphcut import cut_value, graphcut_reassemble, kwatra_costs, seam_take_old
 from texsyn.ops.sparse import batch_omp, constrained_matching_pursuit, ksvd
 
@@ -153,7 +153,7 @@ def test_image_update_decreases_the_energy_with_linear_reconstruction():
     patches, anchors = extract_patches(u, tau, stride=step, mode="periodic")
     coded = (d @ constrained_matching_pursuit(patches.T, d, 3, None)).T
     recon = average_patches(coded, anchors, u.shape, tau, mode="periodic")
-    projector = _HistogramProjector([np.sort(ex, axis=None)], None, u.shape[0] * u.shape[1])
+    projector = HistogramMatcher([np.sort(ex, axis=None)], u.shape[0] * u.shape[1])
     power = _box_power(u.shape[:2], tau)
     ref = np.full(u.shape, ex.mean())
     for beta in (0.0, 1.0):
@@ -169,7 +169,7 @@ def test_image_update_decreases_the_energy_with_linear_reconstruction():
 def test_histogram_projection_gives_the_exemplar_values():
     rng = np.random.default_rng(9)
     ex = rng.random((10, 12))
-    proj = _HistogramProjector([np.sort(ex, axis=None)], None, 120)
+    proj = HistogramMatcher([np.sort(ex, axis=None)], 120)
     out = proj(rng.random((10, 12, 1)), rng)
     np.testing.assert_array_equal(np.sort(out, axis=None), np.sort(ex, axis=None))
 

@@ -10,9 +10,8 @@ from .._validation import Range
 from ..ops import (
     ColorPCA,
     SteerablePyramid,
+    HistogramMatcher,
     as_channels,
-    hist_target,
-    match_sorted,
     periodic_smooth_decomposition,
 )
 from ._base import Progress, TextureSynthesizer
@@ -91,23 +90,17 @@ class HeegerBergen(TextureSynthesizer):
         canvas = (max(shape[0], side), max(shape[1], side))
         channels = len(self.pixel_values_)
         pyr = SteerablePyramid(canvas, self.n_scales, self.n_orientations)
-        pixel_targets = [hist_target(canvas[0] * canvas[1], v, presorted=True) for v in self.pixel_values_]
-        band_targets = {}
-        for key, values in self.band_values_.items():
-            size = _band_size(pyr, key)
-            band_targets[key] = [hist_target(size, v, presorted=True) for v in values]
+        match_pixels = HistogramMatcher(self.pixel_values_, canvas[0] * canvas[1])
+        match_band = {
+            key: HistogramMatcher(values, _band_size(pyr, key)) for key, values in self.band_values_.items()
+        }
 
-        image = rng.standard_normal(canvas + (channels,))
-        for c in range(channels):
-            image[..., c] = match_sorted(image[..., c], pixel_targets[c])
+        image = match_pixels(rng.standard_normal(canvas + (channels,)))
         for it in range(self.n_iterations):
             coeffs = pyr.forward(image)
             for key, band in coeffs.items():
-                for c in range(channels):
-                    band[..., c] = match_sorted(band[..., c], band_targets[key][c])
-            image = pyr.inverse(coeffs)
-            for c in range(channels):
-                image[..., c] = match_sorted(image[..., c], pixel_targets[c])
+                coeffs[key] = match_band[key](band)
+            image = match_pixels(pyr.inverse(coeffs))
             if callback is not None:
                 callback(Progress("iteration", it + 1, self.n_iterations))
         if self.pca_ is not None:

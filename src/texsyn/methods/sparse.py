@@ -27,12 +27,11 @@ from scipy import ndimage
 from .._validation import OneOf, Range
 from ..ops import (
     ColorPCA,
+    HistogramMatcher,
     as_channels,
     average_patches,
     crop_to_multiple,
     extract_patches,
-    hist_target,
-    match_sorted,
     zoom_out,
 )
 from ..ops.graphcut import graphcut_reassemble
@@ -63,23 +62,6 @@ def upsample_bicubic(image: np.ndarray) -> np.ndarray:
     return out
 
 
-class _HistogramProjector:
-    """``T_hist``: exact 1-D optimal-transport matching, per PCA axis for colour (spec 04, 5.3)."""
-
-    def __init__(self, sorted_values: list[np.ndarray], pca: ColorPCA | None, n_pixels: int):
-        self.pca = pca
-        self.targets = [hist_target(n_pixels, v, presorted=True) for v in sorted_values]
-
-    def __call__(self, u: np.ndarray, rng: np.random.Generator | None) -> np.ndarray:
-        coords = self.pca.forward(u) if self.pca is not None else u
-        flat = coords.reshape(-1, coords.shape[-1])
-        out = np.empty_like(flat)
-        for c, target in enumerate(self.targets):
-            out[:, c] = match_sorted(flat[:, c], target, rng=rng)
-        out = out.reshape(coords.shape)
-        return self.pca.inverse(out) if self.pca is not None else out
-
-
 def _box_power(shape: tuple[int, int], tau: int) -> np.ndarray:
     """``|h_hat|^2`` of the normalised ``tau x tau`` box on a periodic canvas."""
     box = np.zeros(shape)
@@ -96,7 +78,7 @@ def _lowpass_apply(e: np.ndarray, power: np.ndarray) -> np.ndarray:
 def image_update(
     u: np.ndarray,
     recon: np.ndarray,
-    projector: _HistogramProjector,
+    projector: HistogramMatcher,
     *,
     alpha: float,
     beta: float,
@@ -124,7 +106,7 @@ def image_energy(
     coded: np.ndarray,
     tau: int,
     step: int,
-    projector: _HistogramProjector,
+    projector: HistogramMatcher,
     *,
     alpha: float,
     beta: float,
@@ -367,7 +349,7 @@ class ConstrainedSparse(TextureSynthesizer):
             else:
                 u = upsample_bicubic(u)
             reference = self._reference(scale, size)
-            projector = _HistogramProjector(scale["sorted"], scale["pca"], size[0] * size[1])
+            projector = HistogramMatcher(scale["sorted"], size[0] * size[1], pca=scale["pca"])
             power = _box_power(size, tau)
             dictionary = scale["dictionary"]
             gram = dictionary.T @ dictionary
@@ -408,7 +390,7 @@ class ConstrainedSparse(TextureSynthesizer):
                     break
         out = u[: shape[0], : shape[1]]
         if self.final_histogram:
-            out = _HistogramProjector(self.scales_[0]["sorted"], self.scales_[0]["pca"], out.shape[0] * out.shape[1])(out, rng)
+            out = HistogramMatcher(self.scales_[0]["sorted"], out.shape[0] * out.shape[1], pca=self.scales_[0]["pca"])(out, rng)
         return out, None
 
     def _reference(self, scale: dict, size: tuple[int, int]) -> np.ndarray:

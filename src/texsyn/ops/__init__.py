@@ -3,6 +3,7 @@
 from .color import ColorPCA, rgb_to_yuv, yuv_to_rgb
 from .fourier import periodic_smooth_decomposition
 from .histogram import (
+    HistogramMatcher,
     hist_target,
     match_histogram,
     match_histogram_pca,
@@ -19,6 +20,7 @@ from .steerable import Pyramid, SteerablePyramid
 __all__ = [
     "ColorPCA",
     "FFTPatchSearch",
+    "HistogramMatcher",
     "Pyramid",
     "SteerablePyramid",
     "WeightedPatchBank",

@@ -7,6 +7,7 @@ import numpy as np
 from .color import ColorPCA
 
 __all__ = [
+    "HistogramMatcher",
     "hist_target",
     "match_sorted",
     "match_histogram",
@@ -96,6 +97,38 @@ def match_histogram(
     return match_sorted(x, hist_target(x.size, reference, method=method), rng=rng)
 
 
+class HistogramMatcher:
+    """Impose fixed per-channel histograms, optionally along principal colour axes.
+
+    The targets for ``n_values`` samples per channel are computed once (spec 00, 5.2), so an
+    iterative method can project at every step at the cost of one sort per channel.
+
+    Parameters
+    ----------
+    sorted_values : list of ndarray
+        Ascending reference values of every channel (PCA coordinates when ``pca`` is given).
+    n_values : int
+        Number of samples per channel of the images to be matched.
+    pca : ColorPCA, optional
+        Match along these axes (spec 00, 5.5) instead of the channels themselves.
+    method : {'ot', 'interp'}
+    """
+
+    def __init__(self, sorted_values, n_values: int, *, pca: ColorPCA | None = None, method: str = "ot"):
+        self.pca = pca
+        self.targets = [hist_target(n_values, v, method=method, presorted=True) for v in sorted_values]
+
+    def __call__(self, image: np.ndarray, rng: np.random.Generator | None = None) -> np.ndarray:
+        """Matched copy of ``image`` (shape ``(..., C)``); ties broken at random with ``rng``."""
+        coords = self.pca.forward(image) if self.pca is not None else np.asarray(image, dtype=np.float64)
+        flat = coords.reshape(-1, coords.shape[-1])
+        out = np.empty_like(flat)
+        for c, target in enumerate(self.targets):
+            out[:, c] = match_sorted(flat[:, c], target, rng=rng)
+        out = out.reshape(coords.shape)
+        return self.pca.inverse(out) if self.pca is not None else out
+
+
 def match_histogram_pca(
     image: np.ndarray,
     reference: np.ndarray,
@@ -113,13 +146,10 @@ def match_histogram_pca(
         Axes computed once from the reference (recomputed when omitted).
     """
     pca = ColorPCA(reference) if pca is None else pca
-    a = pca.forward(image)
-    a0 = pca.forward(reference).reshape(-1, a.shape[-1])
-    flat = a.reshape(-1, a.shape[-1])
-    out = np.empty_like(flat)
-    for c in range(flat.shape[1]):
-        out[:, c] = match_sorted(flat[:, c], hist_target(flat.shape[0], a0[:, c], method=method), rng=rng)
-    return pca.inverse(out).reshape(np.shape(image))
+    ref = pca.forward(reference).reshape(-1, np.shape(reference)[-1])
+    n_values = int(np.prod(np.shape(image)[:-1]))
+    matcher = HistogramMatcher([np.sort(ref[:, c]) for c in range(ref.shape[1])], n_values, pca=pca, method=method)
+    return matcher(image, rng)
 
 
 def transport_energy(x: np.ndarray, y: np.ndarray) -> float:
