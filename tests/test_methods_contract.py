@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import texsyn
+from texsyn._validation import OneOf
 from conftest import FAST_PARAMS, fast_method
 
 
@@ -94,7 +95,10 @@ def test_out_of_range_parameter_is_rejected(method_name, grey_exemplar):
     specs = texsyn.METHODS[method_name].param_specs()
     numeric = [s for s in specs.values() if s.type in (int, float) and s.allowed is not None]
     for spec in numeric:
-        bad = spec.allowed.low - 1 if spec.allowed.low is not None else spec.allowed.high + 1
+        if isinstance(spec.allowed, OneOf):
+            bad = max(spec.allowed.values) + 1
+        else:
+            bad = spec.allowed.low - 1 if spec.allowed.low is not None else spec.allowed.high + 1
         with pytest.raises(ValueError, match=spec.name):
             texsyn.make_method(method_name, **{spec.name: bad}).fit(grey_exemplar)
     with pytest.raises(ValueError, match="unknown parameter 'no_such_option'"):

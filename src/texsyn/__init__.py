@@ -14,6 +14,7 @@ import numpy as np
 from . import data
 from .methods import (
     METHODS,
+    Modification,
     Progress,
     SynthesisResult,
     TextureSynthesizer,
@@ -28,6 +29,7 @@ except PackageNotFoundError:  # pragma: no cover - running from a source tree
 
 __all__ = [
     "METHODS",
+    "Modification",
     "Progress",
     "SynthesisResult",
     "TextureSynthesizer",
@@ -35,6 +37,7 @@ __all__ = [
     "data",
     "get_method",
     "make_method",
+    "modify",
     "synthesize",
 ]
 
@@ -66,3 +69,53 @@ def synthesize(
     ndarray of float32 in [0, 1], same rank and channels as the exemplar.
     """
     return make_method(method, **params).fit(exemplar).sample(shape, rng=rng)
+
+
+def modify(
+    texture: np.ndarray,
+    exemplar: np.ndarray,
+    ratio: float = 0.5,
+    *,
+    equalize: bool = True,
+    grid_boundary: str = "symmetric",
+    per_level: bool = False,
+    callback=None,
+    **params,
+) -> np.ndarray:
+    """Modify a texture toward an exemplar with the patch-valued wavelet transform (Peyré 2007, 5.2).
+
+    ``texture`` is analysed with the exemplar's patches, its wavelet details of magnitude at
+    most ``ratio`` times the largest are removed and the transform is inverted: ``ratio = 0``
+    rebuilds the texture from exemplar pixels, ``ratio = 1`` is a pure synthesis of the
+    exemplar, values in between interpolate between the two textures.
+
+    Parameters
+    ----------
+    texture, exemplar : ndarray, shape (H, W) or (H, W, 3)
+        Float values in [0, 1] (uint8/uint16 are scaled); any sizes.
+    ratio : float
+        Threshold as a fraction of the largest detail magnitude, in [0, 1].
+    equalize : bool
+        Match the exemplar's colour histograms to the texture's first.
+    grid_boundary : {'symmetric', 'periodic'}
+        Border rule of the transform ('periodic' for a texture that tiles).
+    per_level : bool
+        Threshold every level against its own largest detail.
+    callback : callable, optional
+        Receives :class:`Progress` records.
+    **params
+        Hyperparameters of the ``patch_wavelet`` method.
+
+    Returns
+    -------
+    ndarray of float32 in [0, 1], the texture's size with the exemplar's channels.
+
+    See Also
+    --------
+    texsyn.methods.PatchWavelet.modify : the same, returning the source map and magnitudes.
+    """
+    method = make_method("patch_wavelet", **params).fit(exemplar)
+    result = method.modify(
+        texture, ratio, equalize=equalize, grid_boundary=grid_boundary, per_level=per_level, callback=callback
+    )
+    return result.image

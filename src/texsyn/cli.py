@@ -168,6 +168,58 @@ def synth(exemplar, output, method, size, scale, seed, params, source_map, bit_d
 
 
 @cli.command()
+@click.argument("input_image", metavar="INPUT")
+@click.option("-e", "--exemplar", required=True, help="Exemplar whose patches rebuild INPUT (an image file, or builtin:brick|grass|gravel).")
+@click.option("-r", "--ratio", type=float, default=0.5, show_default=True, help="Threshold as a fraction of the largest detail: 0 rebuilds INPUT, 1 is a pure synthesis.")
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Output image (.png, .jpg, .tif).")
+@click.option("--magnitudes", type=click.Path(dir_okay=False), help="Also write the kept detail magnitudes packed like a wavelet transform: a .npy array, or a .png/.tif picture (square root of magnitude / largest).")
+@click.option("--no-equalize", is_flag=True, help="Do not match the exemplar's colours to INPUT first.")
+@click.option("--boundary", type=click.Choice(["symmetric", "periodic"]), default="symmetric", show_default=True, help="Border rule of the transform (periodic for an INPUT that tiles).")
+@click.option("--per-level", is_flag=True, help="Threshold every level against its own largest detail.")
+@click.option("-p", "--param", "params", multiple=True, metavar="NAME=VALUE", help="Parameter of the patch_wavelet method (repeatable).")
+@click.option("--bit-depth", type=click.Choice(["8", "16"]), default="8", show_default=True, help="Bits per sample of the output (16 for PNG/TIFF).")
+@click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
+def modify(input_image, exemplar, ratio, output, magnitudes, no_equalize, boundary, per_level, params, bit_depth, quiet):
+    """Modify the texture INPUT (an image file or builtin:NAME) toward EXEMPLAR (Peyré 2007).
+
+    INPUT is expressed with the exemplar's patches and decomposed; wavelet details below
+    RATIO times the largest are removed before rebuilding.
+    """
+    if not 0.0 <= ratio <= 1.0:
+        raise click.BadParameter(f"--ratio must be in [0, 1], got {ratio}")
+    depth = int(bit_depth)
+    out_path = check_output_path(output, bit_depth=depth)
+    mag_path = None
+    if magnitudes is not None:
+        if Path(magnitudes).suffix.lower() == ".npy":
+            mag_path = check_output_path(magnitudes, formats={".npy": (8,)})
+        else:
+            mag_path = check_output_path(magnitudes)
+    parameters = _parse_params("patch_wavelet", params)
+    method = make_method("patch_wavelet", **parameters)
+    texture, _ = _load_exemplar(input_image)
+    image, label = _load_exemplar(exemplar)
+    bar = _ProgressBar("modify", enabled=not quiet)
+    try:
+        method.fit(image)
+        result = method.modify(
+            texture, ratio, equalize=not no_equalize, grid_boundary=boundary, per_level=per_level, callback=bar
+        )
+    finally:
+        bar.close()
+    write_image(out_path, result.image, bit_depth=depth)
+    if mag_path is not None:
+        if mag_path.suffix.lower() == ".npy":
+            write_array(mag_path, result.magnitudes)
+        else:
+            top = result.magnitudes.max()
+            write_image(mag_path, np.sqrt(result.magnitudes / top) if top > 0 else result.magnitudes)
+    if not quiet:
+        h, w = result.image.shape[:2]
+        click.echo(f"wrote {out_path} ({w}x{h}, ratio {ratio:g}, exemplar {label})", err=True)
+
+
+@cli.command()
 @click.argument("exemplar", required=False)
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Report file (.html); a .json sidecar is written beside it.")
 @click.option("-m", "--method", "methods", multiple=True, help="Method to compare (repeatable; all methods by default).")
@@ -225,6 +277,8 @@ def list_methods() -> None:
             click.echo("  parameters:")
             for spec in specs.values():
                 default = "none" if spec.default is None else spec.default
+                if isinstance(default, tuple):
+                    default = ",".join(f"{v:g}" for v in default)
                 click.echo(
                     f"    {spec.name} = {default}  ({spec.type.__name__}, allowed {spec.describe_allowed()})"
                     + (f"  {spec.description}" if spec.description else "")

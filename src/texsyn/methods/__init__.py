@@ -7,13 +7,14 @@ from .efros_leung import EfrosLeung
 from .gaussian import CLG, LG, MSLG, RCLG
 from .heeger_bergen import HeegerBergen
 from .quilting import Quilting
+from .patch_wavelet import Modification, PatchWavelet
 from .random_phase import RandomPhase
 from .sparse import ConstrainedSparse
 from .wavelet_sampling import ComplexWaveletSampling
 from .wei_levoy import WeiLevoy
 
 METHODS: dict[str, type[TextureSynthesizer]] = {
-    cls.name: cls for cls in (Quilting, EfrosLeung, HeegerBergen, RandomPhase, LG, CLG, RCLG, MSLG, ConstrainedSparse, ComplexWaveletSampling, WeiLevoy)
+    cls.name: cls for cls in (Quilting, EfrosLeung, HeegerBergen, RandomPhase, LG, CLG, RCLG, MSLG, ConstrainedSparse, ComplexWaveletSampling, WeiLevoy, PatchWavelet)
 }
 
 __all__ = [
@@ -23,10 +24,12 @@ __all__ = [
     "LG",
     "METHODS",
     "MSLG",
+    "Modification",
     "RCLG",
     "EfrosLeung",
     "HeegerBergen",
     "ParamSpec",
+    "PatchWavelet",
     "Progress",
     "Quilting",
     "RandomPhase",

@@ -76,7 +76,10 @@ class ParamSpec:
 
     def describe_allowed(self) -> str:
         parts = []
-        if self.allowed is not None:
+        if self.type is tuple:
+            each = f" in {self.allowed.describe()}" if self.allowed is not None else ""
+            parts.append(f"a number or comma-separated numbers{each}")
+        elif self.allowed is not None:
             parts.append(self.allowed.describe())
         elif self.type is bool:
             parts.append("true or false")
@@ -116,9 +119,26 @@ class ParamSpec:
         elif kind is str:
             if not isinstance(value, str):
                 raise TypeError(f"{where} must be a string, got {value!r}")
+        elif kind is tuple:
+            return self._check_numbers(value, where)
         if self.allowed is not None and not self.allowed.contains(value):
             raise ValueError(f"{where} must be in {self.allowed.describe()}, got {value!r}")
         return value
+
+    def _check_numbers(self, value: Any, where: str) -> tuple[float, ...]:
+        """A number or a non-empty sequence of numbers, each finite and allowed."""
+        items = [value] if np.ndim(value) == 0 else list(np.ravel(np.asarray(value, dtype=object)))
+        if not items:
+            raise ValueError(f"{where} must be {self.describe_allowed()}, got an empty list")
+        out = []
+        for item in items:
+            if isinstance(item, (bool, np.bool_)) or not isinstance(item, (int, float, np.integer, np.floating)):
+                raise TypeError(f"{where} must be {self.describe_allowed()}, got {value!r}")
+            x = float(item)
+            if not np.isfinite(x) or (self.allowed is not None and not self.allowed.contains(x)):
+                raise ValueError(f"{where} must be {self.describe_allowed()}, got {value!r}")
+            out.append(x)
+        return tuple(out)
 
     def parse(self, text: str, method: str) -> Any:
         """Convert a command-line string to this parameter's type, then :meth:`check` it."""
@@ -138,6 +158,8 @@ class ParamSpec:
                 value = int(text)
             elif self.type is float:
                 value = float(text)
+            elif self.type is tuple:
+                value = tuple(float(part) for part in text.split(","))
             else:
                 value = text
         except ValueError:
@@ -207,6 +229,8 @@ class TextureSynthesizer:
                 allowed = next((e for e in extras if isinstance(e, (Range, OneOf))), None)
             else:
                 base = hint
+            if typing.get_origin(base) is tuple:
+                base = tuple
             optional = False
             args = typing.get_args(base)
             if args and type(None) in args:

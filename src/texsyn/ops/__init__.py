@@ -10,16 +10,31 @@ from .histogram import (
     match_sorted,
     transport_energy,
 )
-from .patches import as_channels, average_patches, extract_patches, overlap_add
+from .patches import (
+    as_channels,
+    average_patches,
+    extend_index,
+    extract_patches,
+    overlap_add,
+    wrap_seam_ratio,
+)
 from .positions import position_colors
 from .pyramids import crop_to_multiple, gaussian_blur, gaussian_pyramid, zoom_in, zoom_out
-from .search import FFTPatchSearch, WeightedPatchBank, knn_patches, knn_select, nearest_both_ways
+from .search import (
+    FFTPatchSearch,
+    NearestPatchIndex,
+    WeightedPatchBank,
+    knn_patches,
+    knn_select,
+    nearest_both_ways,
+)
 from .seams import boundary_cut_mask, cumulative_path_cost, min_path, overlap_error
 from .steerable import Pyramid, SteerablePyramid
 
 __all__ = [
     "ColorPCA",
     "FFTPatchSearch",
+    "NearestPatchIndex",
     "HistogramMatcher",
     "Pyramid",
     "SteerablePyramid",
@@ -29,6 +44,7 @@ __all__ = [
     "boundary_cut_mask",
     "crop_to_multiple",
     "cumulative_path_cost",
+    "extend_index",
     "extract_patches",
     "gaussian_blur",
     "gaussian_pyramid",
@@ -46,6 +62,7 @@ __all__ = [
     "position_colors",
     "rgb_to_yuv",
     "transport_energy",
+    "wrap_seam_ratio",
     "yuv_to_rgb",
     "zoom_in",
     "zoom_out",

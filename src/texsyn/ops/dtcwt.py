@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .dtcwt_filters import FILTERS
+from .patches import extend_index
 
 __all__ = ["DTCWT", "DTCWTPyramid"]
 
@@ -39,12 +40,6 @@ class DTCWTPyramid:
         return self.highpasses[level - 1][..., band]
 
 
-def _extend_index(idx: np.ndarray, n: int) -> np.ndarray:
-    """Half-sample symmetric extension of indices into ``[0, n)`` (edge sample repeated)."""
-    u = np.mod(idx, 2 * n)
-    return np.where(u < n, u, 2 * n - 1 - u)
-
-
 def _along(x: np.ndarray, axis: int, fn) -> np.ndarray:
     moved = np.moveaxis(x, axis, 0)
     return np.moveaxis(fn(moved), 0, axis)
@@ -56,7 +51,7 @@ def _full(x: np.ndarray, h: np.ndarray, axis: int) -> np.ndarray:
     def fn(v):
         r, m = v.shape[0], h.size
         c = (m - 1) // 2
-        idx = _extend_index(np.arange(r)[:, None] + c - np.arange(m)[None, :], r)
+        idx = extend_index(np.arange(r)[:, None] + c - np.arange(m)[None, :], r)
         return np.tensordot(v[idx], h, axes=([1], [0])) if v.ndim == 1 else np.einsum("rl...,l->r...", v[idx], h)
 
     return _along(x, axis, fn)
@@ -69,8 +64,8 @@ def _down(x: np.ndarray, ha: np.ndarray, hb: np.ndarray, axis: int) -> np.ndarra
         r, m = v.shape[0], ha.size
         n = np.arange(r // 4)[:, None]
         taps = np.arange(m)[None, :]
-        u = np.einsum("nl...,l->n...", v[_extend_index(4 * n + m - 2 * taps, r)], ha)
-        w = np.einsum("nl...,l->n...", v[_extend_index(4 * n + m + 1 - 2 * taps, r)], hb)
+        u = np.einsum("nl...,l->n...", v[extend_index(4 * n + m - 2 * taps, r)], ha)
+        w = np.einsum("nl...,l->n...", v[extend_index(4 * n + m + 1 - 2 * taps, r)], hb)
         out = np.empty((r // 2,) + v.shape[1:], dtype=np.result_type(v, ha))
         if np.dot(ha, hb) > 0:
             out[0::2], out[1::2] = u, w
@@ -93,8 +88,8 @@ def _up(x: np.ndarray, ga: np.ndarray, gb: np.ndarray, axis: int) -> np.ndarray:
         other = 1 - delta
         n = np.arange(r // 2)[:, None]
         k = np.arange(c)[None, :]
-        even = _extend_index(2 * n + c - 2 * k - delta, r)
-        odd = _extend_index(2 * n + c - 2 * k - other, r)
+        even = extend_index(2 * n + c - 2 * k - delta, r)
+        odd = extend_index(2 * n + c - 2 * k - other, r)
         out = np.zeros((2 * r,) + v.shape[1:], dtype=np.result_type(v, ga))
         out[0::4] = np.einsum("nk...,k->n...", v[even], ga[0::2])
         out[1::4] = np.einsum("nk...,k->n...", v[odd], gb[0::2])

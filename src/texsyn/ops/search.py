@@ -12,6 +12,8 @@ clamped at zero (the terms nearly cancel for good matches).
 
 from __future__ import annotations
 
+from typing import Callable
+
 import numba
 import numpy as np
 
@@ -20,6 +22,7 @@ from .patches import as_channels
 __all__ = [
     "knn_select",
     "FFTPatchSearch",
+    "NearestPatchIndex",
     "WeightedPatchBank",
     "knn_patches",
     "nearest_both_ways",
@@ -262,3 +265,102 @@ def nearest_both_ways(
         q = queries[start : start + block]
         _fold_minima(q @ bank.T, query_norm[start : start + block], bank_norm, start, q_idx, q_dist, b_idx, b_dist)
     return q_idx, q_dist, b_idx, b_dist
+
+
+@numba.njit(parallel=True, cache=True)
+def _best_columns(gram, half_norm, k, out):
+    """Per row, the ``k`` columns with the smallest ``half_norm[j] - gram[i, j]`` (ties: lower j)."""
+    n_rows, n_cols = gram.shape
+    for i in numba.prange(n_rows):
+        values = np.full(k, np.inf)
+        index = np.zeros(k, dtype=np.int64)
+        for j in range(n_cols):
+            v = half_norm[j] - gram[i, j]
+            if v < values[k - 1]:
+                p = k - 1
+                while p > 0 and values[p - 1] > v:
+                    values[p] = values[p - 1]
+                    index[p] = index[p - 1]
+                    p -= 1
+                values[p] = v
+                index[p] = j
+        out[i, :] = index
+
+
+class NearestPatchIndex:
+    """Nearest bank row of many query rows: a float32 BLAS screen, then an exact re-rank.
+
+    Spec 00, sections 2.2-2.3. The bank is centred on its mean (which keeps the float32
+    products accurate), the ``candidates`` best rows of every query are found from the
+    products ``Q X^T`` in float32 blocks by a compiled selection loop, and these candidates
+    are re-ranked by their exact float64 squared distance (ties: lowest row). The result is
+    the exact nearest row unless several rows are within float32 rounding of the best
+    (relative 1e-6), where any of them may be returned, deterministically.
+
+    Parameters
+    ----------
+    bank : ndarray, shape (K, D)
+    candidates : int
+        Rows re-ranked exactly per query.
+    block : int
+        Queries per matrix product (memory: ``block * K`` float32).
+    rows : callable, optional
+        ``rows(indices) -> (n, D) float64``: the exact bank rows, for banks that are cheaper to
+        recompute than to keep in float64. By default a float64 copy of ``bank`` is kept.
+    """
+
+    def __init__(
+        self,
+        bank: np.ndarray,
+        *,
+        candidates: int = 4,
+        block: int = 1024,
+        rows: Callable[[np.ndarray], np.ndarray] | None = None,
+    ):
+        bank = np.asarray(bank)
+        if bank.ndim != 2 or bank.shape[0] == 0:
+            raise ValueError(f"bank must be a non-empty (K, D) array, got shape {bank.shape}")
+        self.mean = bank.mean(axis=0, dtype=np.float64)
+        centred = np.ascontiguousarray((bank - self.mean).astype(np.float32))
+        self._bank32 = centred
+        self._half_norm = 0.5 * np.einsum("kd,kd->k", centred, centred, dtype=np.float64).astype(np.float32)
+        if rows is None:
+            exact = np.array(bank, dtype=np.float64)
+            rows = exact.__getitem__
+        self._rows = rows
+        self.candidates = int(min(max(candidates, 1), bank.shape[0]))
+        self.block = int(block)
+
+    def __len__(self) -> int:
+        return self._bank32.shape[0]
+
+    def query(self, queries: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Nearest bank row of every query.
+
+        Returns
+        -------
+        index : ndarray of int64, shape (Q,)
+        distance : ndarray of float64, shape (Q,)
+            Exact squared Euclidean distance to that row.
+        """
+        queries = np.asarray(queries, dtype=np.float64)
+        dim = self._bank32.shape[1]
+        if queries.ndim != 2 or queries.shape[1] != dim:
+            raise ValueError(f"queries must have shape (Q, {dim}), got {queries.shape}")
+        n = queries.shape[0]
+        index = np.empty(n, dtype=np.int64)
+        distance = np.empty(n)
+        cand = np.empty((min(n, self.block), self.candidates), dtype=np.int64)
+        for start in range(0, n, self.block):
+            q = queries[start : start + self.block]
+            m = q.shape[0]
+            gram = (q - self.mean).astype(np.float32) @ self._bank32.T
+            _best_columns(gram, self._half_norm, self.candidates, cand[:m])
+            c = cand[:m]
+            diff = self._rows(c.ravel()).reshape(m, self.candidates, dim) - q[:, None, :]
+            d = np.einsum("qkd,qkd->qk", diff, diff)
+            best = d.min(axis=1, keepdims=True)
+            pick = np.where(d == best, c, np.iinfo(np.int64).max).min(axis=1)
+            index[start : start + m] = pick
+            distance[start : start + m] = best[:, 0]
+        return index, distance
