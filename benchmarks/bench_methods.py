@@ -48,6 +48,7 @@ TARGETS = {
     ("cwt", "grey", 256): 2.0,
     ("cwt", "colour", 256): 3.0,
     ("sparse", "colour", 256): 60.0,
+    ("patch_wavelet", "colour", 256): 10.0,
 }
 
 
