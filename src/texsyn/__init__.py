@@ -14,6 +14,7 @@ import numpy as np
 from . import data
 from .methods import (
     METHODS,
+    Frame,
     Modification,
     Progress,
     SynthesisResult,
@@ -28,6 +29,8 @@ except PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = "0.0.0+unknown"
 
 __all__ = [
+    "animate",
+    "Frame",
     "METHODS",
     "Modification",
     "Progress",
@@ -119,3 +122,35 @@ def modify(
         texture, ratio, equalize=equalize, grid_boundary=grid_boundary, per_level=per_level, callback=callback
     )
     return result.image
+
+
+def animate(
+    exemplar: np.ndarray,
+    n_frames: int = 60,
+    shape: tuple[int, int] | None = None,
+    rng: None | int | np.random.Generator = None,
+    *,
+    callback=None,
+    **params,
+):
+    """Frames of a fluid-driven dynamic texture (Peyré 2008, grouplets), as a generator.
+
+    Parameters
+    ----------
+    exemplar : ndarray, shape (H, W) or (H, W, 3)
+        An oriented texture (wood grain, fibres, waves, turbulence...).
+    n_frames : int
+        Number of frames.
+    shape : (int, int), optional
+        Frame size; the exemplar's by default.
+    rng : None, int or numpy.random.Generator
+    **params
+        Hyperparameters of the ``grouplets`` method (``viscosity``, ``speed``, ``tau``...).
+
+    Yields
+    ------
+    Frame
+        ``frame.image`` (float32 in [0, 1]) and ``frame.flow`` (the velocity field).
+    """
+    method = make_method("grouplets", **params).fit(exemplar)
+    yield from method.animate(n_frames, shape, rng=rng, callback=callback)

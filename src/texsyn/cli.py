@@ -219,6 +219,55 @@ def modify(input_image, exemplar, ratio, output, magnitudes, no_equalize, bounda
         click.echo(f"wrote {out_path} ({w}x{h}, ratio {ratio:g}, exemplar {label})", err=True)
 
 
+VIDEO_FORMATS = (".mp4", ".gif")
+
+
+@cli.command()
+@click.argument("exemplar", required=False)
+@click.option("-o", "--output", required=True, type=click.Path(), help="Video (.mp4, .gif) or a new folder for PNG frames.")
+@click.option("--frames", type=click.IntRange(min=1, max=100000), default=60, show_default=True, help="Number of frames.")
+@click.option("--fps", type=click.FloatRange(min=0.1, max=240), default=24.0, show_default=True, help="Frames per second of the video.")
+@click.option("--viscosity", type=click.FloatRange(min=0.0), help="Fluid viscosity (parameter 'viscosity' of grouplets).")
+@click.option("--size", help="Frame size WIDTHxHEIGHT [default: the exemplar's].")
+@click.option("--seed", type=click.IntRange(min=0), help="Random seed; the same seed gives the same animation.")
+@click.option("--loop", type=click.IntRange(min=0), default=0, show_default=True, help="Cross-fade this many extra frames so the video loops seamlessly.")
+@click.option("-p", "--param", "params", multiple=True, metavar="NAME=VALUE", help="Parameter of the grouplets method (repeatable).")
+@click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
+def animate(exemplar, output, frames, fps, viscosity, size, seed, loop, params, quiet):
+    """Animate EXEMPLAR with fluid dynamics (Peyré 2008, grouplets): write a video or frames.
+
+    EXEMPLAR is an image file or builtin:brick|grass|gravel (default: brick). An oriented
+    texture (wood, fibres, waves) works best.
+    """
+    from .io import write_frames
+
+    out_path = Path(output)
+    suffix = out_path.suffix.lower()
+    if suffix and suffix not in VIDEO_FORMATS:
+        raise ValueError(f"cannot write {suffix!r} animations; use .mp4, .gif or a folder name (PNG frames)")
+    if not out_path.parent.exists():
+        raise FileNotFoundError(f"no such folder: '{out_path.parent}'")
+    if not suffix and out_path.exists() and (not out_path.is_dir() or any(out_path.iterdir())):
+        raise FileExistsError(f"'{out_path}' exists and is not an empty folder")
+    if loop and loop >= frames:
+        raise click.BadParameter(f"--loop must be smaller than --frames ({frames}), got {loop}")
+    parameters = _parse_params("grouplets", params)
+    if viscosity is not None:
+        parameters["viscosity"] = get_method("grouplets").param_specs()["viscosity"].check(viscosity, "grouplets")
+    method = make_method("grouplets", **parameters)
+    image, label = _load_exemplar(exemplar)
+    shape = _parse_size(size) if size is not None else None
+    bar = _ProgressBar("animate", enabled=not quiet)
+    try:
+        method.fit(image)
+        sequence = (f.image for f in method.animate(frames, shape, rng=seed, callback=bar, loop=loop))
+        write_frames(out_path, sequence, fps=fps)
+    finally:
+        bar.close()
+    if not quiet:
+        click.echo(f"wrote {out_path} ({frames} frames at {fps:g} fps, from {label})", err=True)
+
+
 @cli.command()
 @click.argument("exemplar", required=False)
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Report file (.html); a .json sidecar is written beside it.")

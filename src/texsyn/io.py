@@ -174,9 +174,12 @@ def check_output_path(path: str | os.PathLike, *, bit_depth: int = 8, formats=No
     return p
 
 
-def atomic_write(path: Path, writer) -> None:
-    """Call ``writer(temporary_path)`` in ``path``'s folder, then rename it to ``path``."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent or ".")
+def atomic_write(path: Path, writer, *, suffix: str = ".part") -> None:
+    """Call ``writer(temporary_path)`` in ``path``'s folder, then rename it to ``path``.
+
+    ``suffix`` ends the temporary name (writers that choose the format from it need the real one).
+    """
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent or ".")
     os.close(fd)
     try:
         writer(tmp)
@@ -286,3 +289,77 @@ def load_fitted(path: str | os.PathLike, **params):
         raise ValueError(f"'{p}' is not a saved texsyn model (no method or format_version)")
     cls = get_method(str(state["method"]))
     return cls.from_fitted_state(state, **params)
+
+
+def _to_uint8(frame: np.ndarray) -> np.ndarray:
+    arr = np.asarray(frame, dtype=np.float64)
+    if not np.all(np.isfinite(arr)) or arr.min() < 0 or arr.max() > 1:
+        raise ValueError("frame values must be finite and lie in [0, 1]")
+    return np.rint(arr * 255.0).astype(np.uint8)
+
+
+def write_frames(path: str | os.PathLike, frames, *, fps: float = 24.0) -> Path:
+    """Write a sequence of float frames in [0, 1] as a video, a GIF or a folder of PNGs, atomically.
+
+    Parameters
+    ----------
+    path : str or path-like
+        ``.mp4`` (H.264 through imageio-ffmpeg; odd sizes are padded by one edge row/column),
+        ``.gif`` (looping), or a path without suffix: a new (or empty) folder that receives
+        ``frame_00000.png``, ... .
+    frames : iterable of ndarray, shape (H, W) or (H, W, 3)
+        Consumed one at a time (a generator is fine); nothing is left behind on error.
+    fps : float
+        Frames per second.
+    """
+    import shutil
+
+    import imageio.v3 as iio
+
+    p = Path(path)
+    suffix = p.suffix.lower()
+    if not p.parent.is_dir():
+        raise FileNotFoundError(f"cannot write '{p}': folder '{p.parent}' does not exist")
+    if suffix == ".gif":
+
+        def write_gif(tmp: str) -> None:
+            images = [_to_uint8(f) for f in frames]
+            if not images:
+                raise ValueError("no frames to write")
+            iio.imwrite(tmp, images, extension=".gif", duration=1000.0 / fps, loop=0)
+
+        atomic_write(p, write_gif, suffix=".gif")
+    elif suffix == ".mp4":
+        import imageio.v2 as iio2
+
+        def write_mp4(tmp: str) -> None:
+            count = 0
+            with iio2.get_writer(tmp, format="FFMPEG", fps=fps, codec="libx264", quality=8, macro_block_size=1, pixelformat="yuv420p") as writer:
+                for frame in frames:
+                    data = _to_uint8(frame)
+                    if data.ndim == 2:
+                        data = np.repeat(data[..., None], 3, axis=2)
+                    h, w = data.shape[:2]
+                    data = np.pad(data, ((0, h % 2), (0, w % 2), (0, 0)), mode="edge")
+                    writer.append_data(data)
+                    count += 1
+            if count == 0:
+                raise ValueError("no frames to write")
+
+        atomic_write(p, write_mp4, suffix=".mp4")
+    elif suffix == "":
+        if p.exists() and (not p.is_dir() or any(p.iterdir())):
+            raise FileExistsError(f"'{p}' exists and is not an empty folder")
+        tmp = Path(tempfile.mkdtemp(prefix=f".{p.name}.", dir=p.parent))
+        try:
+            for i, frame in enumerate(frames):
+                iio.imwrite(tmp / f"frame_{i:05d}.png", _to_uint8(frame))
+            if p.exists():
+                p.rmdir()
+            os.replace(tmp, p)
+        except BaseException:
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise
+    else:
+        raise ValueError(f"cannot write {suffix!r} animations; use .mp4, .gif or a folder name (PNG frames)")
+    return p

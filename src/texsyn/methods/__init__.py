@@ -5,6 +5,7 @@ from __future__ import annotations
 from ._base import ParamSpec, Progress, SynthesisResult, TextureSynthesizer
 from .efros_leung import EfrosLeung
 from .gaussian import CLG, LG, MSLG, RCLG
+from .grouplets import Frame, Grouplets
 from .heeger_bergen import HeegerBergen
 from .quilting import Quilting
 from .patch_wavelet import Modification, PatchWavelet
@@ -14,7 +15,7 @@ from .wavelet_sampling import ComplexWaveletSampling
 from .wei_levoy import WeiLevoy
 
 METHODS: dict[str, type[TextureSynthesizer]] = {
-    cls.name: cls for cls in (Quilting, EfrosLeung, HeegerBergen, RandomPhase, LG, CLG, RCLG, MSLG, ConstrainedSparse, ComplexWaveletSampling, WeiLevoy, PatchWavelet)
+    cls.name: cls for cls in (Quilting, EfrosLeung, HeegerBergen, RandomPhase, LG, CLG, RCLG, MSLG, ConstrainedSparse, ComplexWaveletSampling, WeiLevoy, PatchWavelet, Grouplets)
 }
 
 __all__ = [
@@ -27,6 +28,8 @@ __all__ = [
     "Modification",
     "RCLG",
     "EfrosLeung",
+    "Frame",
+    "Grouplets",
     "HeegerBergen",
     "ParamSpec",
     "PatchWavelet",

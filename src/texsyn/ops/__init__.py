@@ -8,6 +8,7 @@ from .histogram import (
     match_histogram,
     match_histogram_pca,
     match_sorted,
+    match_sorted_rows,
     transport_energy,
 )
 from .patches import (
@@ -54,6 +55,7 @@ __all__ = [
     "match_histogram",
     "match_histogram_pca",
     "match_sorted",
+    "match_sorted_rows",
     "min_path",
     "nearest_both_ways",
     "overlap_add",

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 from .color import ColorPCA
@@ -10,6 +11,7 @@ __all__ = [
     "HistogramMatcher",
     "hist_target",
     "match_sorted",
+    "match_sorted_rows",
     "match_histogram",
     "match_histogram_pca",
     "transport_energy",
@@ -80,6 +82,31 @@ def match_sorted(
     out = np.empty(flat.size, dtype=np.float64)
     out[order] = target_sorted
     return out.reshape(x.shape)
+
+
+def match_sorted_rows(values: np.ndarray, targets_sorted: np.ndarray) -> np.ndarray:
+    """:func:`match_sorted` for many rows at once: row ``i`` of ``values`` gets the values of
+    row ``i`` of ``targets_sorted`` in the order of its ranks (ties broken by position).
+
+    Parameters
+    ----------
+    values, targets_sorted : ndarray, shape (B, N)
+    """
+    x = np.ascontiguousarray(values, dtype=np.float64)
+    t = np.ascontiguousarray(targets_sorted, dtype=np.float64)
+    if x.ndim != 2 or x.shape != t.shape:
+        raise ValueError(f"values {x.shape} and targets {t.shape} must be equal (B, N) arrays")
+    return _match_rows(x, t)
+
+
+@numba.njit(parallel=True, cache=True)
+def _match_rows(x, targets):
+    out = np.empty_like(x)
+    for i in numba.prange(x.shape[0]):
+        order = np.argsort(x[i], kind="mergesort")  # stable: ties keep their order
+        row = out[i]
+        row[order] = targets[i]
+    return out
 
 
 def match_histogram(

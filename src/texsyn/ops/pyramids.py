@@ -91,3 +91,56 @@ def gaussian_pyramid(
             )
         out.append(zoom_out(out[-1], sigma, mode=mode))
     return out
+
+
+class LaplacianTightFrame:
+    """Translation-invariant Laplacian pyramid as a Parseval tight frame (spec 00, 4.4).
+
+    Radial Fourier filters ``Psi_j`` (``j < J``) and ``Phi_J`` with ``sum Psi_j^2 + Phi_J^2 = 1``:
+    undecimated, non-oriented bands of the full image size, exact reconstruction and
+    ``sum_j ||f_j||^2 = ||f||^2``. Periodic. Used by the wavelet-grouplet transform (Peyré
+    2008, section 2.3; the paper's weights ``kappa_j`` are absorbed in the filters).
+
+    Parameters
+    ----------
+    shape : (int, int)
+        Image size ``(H, W)``.
+    levels : int
+        Number ``J`` of detail bands; the transform returns ``J + 1`` bands.
+    """
+
+    def __init__(self, shape: tuple[int, int], levels: int = 3):
+        h, w = shape
+        self.shape = (int(h), int(w))
+        self.levels = int(levels)
+        kr = np.fft.fftfreq(h)[:, None]
+        kc = np.fft.rfftfreq(w)[None, :]
+        radius = 2 * np.pi * np.sqrt(kr**2 + kc**2)
+
+        def lowpass(r):
+            out = np.zeros_like(r)
+            out[r <= np.pi / 4] = 1.0
+            mid = (r > np.pi / 4) & (r < np.pi / 2)
+            out[mid] = np.cos(np.pi / 2 * np.log2(4 * r[mid] / np.pi))
+            return out
+
+        phis = [np.ones_like(radius)] + [lowpass(2 ** (j - 1) * radius) for j in range(1, self.levels + 1)]
+        self.filters = np.stack(
+            [np.sqrt(np.maximum(phis[j] ** 2 - phis[j + 1] ** 2, 0.0)) for j in range(self.levels)] + [phis[-1]]
+        )
+
+    def forward(self, image: np.ndarray) -> np.ndarray:
+        """Bands ``(J+1, H, W[, C])`` of an image ``(H, W[, C])``; band ``J`` is the low-pass."""
+        x = np.asarray(image, dtype=np.float64)
+        if x.shape[:2] != self.shape:
+            raise ValueError(f"image has size {x.shape[:2]}, the frame was built for {self.shape}")
+        spectrum = np.fft.rfft2(x, axes=(0, 1))
+        filt = self.filters if x.ndim == 2 else self.filters[..., None]
+        return np.fft.irfft2(filt * spectrum[None], s=self.shape, axes=(1, 2))
+
+    def inverse(self, bands: np.ndarray) -> np.ndarray:
+        """Image from its bands (the adjoint, which is the exact inverse of a tight frame)."""
+        b = np.asarray(bands, dtype=np.float64)
+        spectra = np.fft.rfft2(b, axes=(1, 2))
+        filt = self.filters if b.ndim == 3 else self.filters[..., None]
+        return np.fft.irfft2(np.sum(filt * spectra, axis=0), s=self.shape, axes=(0, 1))
