@@ -49,6 +49,8 @@ TARGETS = {
     ("cwt", "colour", 256): 3.0,
     ("sparse", "colour", 256): 60.0,
     ("patch_wavelet", "colour", 256): 10.0,
+    ("grouplets", "colour", 256): 10.0,
+    ("grouplets", "grey", 256): 10.0,
 }
 
 

@@ -25,6 +25,8 @@ for name in sorted(texsyn.METHODS):
         exemplar, shape = big, (56, 60)
     out = texsyn.synthesize(exemplar, name, shape, rng=11, **params)
     print(name, hashlib.sha256(out.tobytes()).hexdigest())
+frames = [f.image for f in texsyn.animate(big, 3, (32, 32), rng=4, n_iterations=3)]
+print("animate", hashlib.sha256(np.stack(frames).tobytes()).hexdigest())
 modified = texsyn.modify(layers[:32, :32], big, 0.1)
 print("modify", hashlib.sha256(modified.tobytes()).hexdigest())
 """
@@ -46,5 +48,5 @@ def run_with_threads(threads):
 def test_same_seed_same_output_with_one_thread_and_default_threads():
     single = run_with_threads(1)
     default = run_with_threads(None)
-    assert set(single) == set(texsyn.METHODS) | {"modify"}
+    assert set(single) == set(texsyn.METHODS) | {"modify", "animate"}
     assert single == default

@@ -18,7 +18,7 @@ import numpy as np
 
 from . import __version__, data
 from .io import check_output_path, read_image, write_array, write_image
-from .methods import METHODS, Progress, get_method, make_method
+from .methods import METHODS, Progress, SynthesisResult, get_method, make_method
 from .ops import position_colors
 
 EXIT_BAD_INPUT = 2
@@ -93,6 +93,24 @@ def _parse_params(method: str, items: tuple[str, ...]) -> dict:
     return params
 
 
+def _read_flow(path: str) -> np.ndarray:
+    """A flow field from a .npy array (H, W, 2) or from the red/green channels of an image."""
+    if Path(path).suffix.lower() == ".npy":
+        if not Path(path).is_file():
+            raise FileNotFoundError(f"no such file: '{path}'")
+        try:
+            flow = np.load(path, allow_pickle=False)
+        except (ValueError, OSError) as exc:
+            raise ValueError(f"cannot read '{path}' as a NumPy array ({exc})") from None
+        if flow.ndim != 3 or flow.shape[2] != 2 or not np.issubdtype(flow.dtype, np.number):
+            raise ValueError(f"flow array '{path}' must have shape (H, W, 2), got {flow.shape}")
+        return flow.astype(np.float64)
+    picture = read_image(path)
+    if picture.ndim != 3:
+        raise ValueError(f"flow image '{path}' must be a colour image (red = row, green = column component)")
+    return 2.0 * picture[..., :2].astype(np.float64) - 1.0
+
+
 def _load_exemplar(exemplar: str | None) -> tuple[np.ndarray, str]:
     if exemplar is None:
         return data.exemplar("brick"), "built-in brick"
@@ -118,8 +136,9 @@ def cli() -> None:
 @click.option("-p", "--param", "params", multiple=True, metavar="NAME=VALUE", help="Method parameter (repeatable).")
 @click.option("--source-map", type=click.Path(dir_okay=False), help="Also write where each pixel came from (.npy array, or a .png/.tif position-colour picture).")
 @click.option("--bit-depth", type=click.Choice(["8", "16"]), default="8", show_default=True, help="Bits per sample of the output (16 for PNG/TIFF).")
+@click.option("--flow", "flow_file", type=click.Path(dir_okay=False), help="Flow to synthesise along (grouplets): a .npy (H, W, 2) array of (row, col) vectors, or an image whose red and green channels map [0, 1] to row and column components in [-1, 1]. The output takes its size.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
-def synth(exemplar, output, method, size, scale, seed, params, source_map, bit_depth, quiet):
+def synth(exemplar, output, method, size, scale, seed, params, source_map, bit_depth, flow_file, quiet):
     """Synthesise a texture from EXEMPLAR (an image file, or builtin:brick|grass|gravel).
 
     Without EXEMPLAR, the built-in brick texture is used.
@@ -141,8 +160,17 @@ def synth(exemplar, output, method, size, scale, seed, params, source_map, bit_d
             map_path = check_output_path(source_map, formats={".npy": (8,)})
         else:
             map_path = check_output_path(source_map)
+    flow = None
+    if flow_file is not None:
+        if not hasattr(synthesizer, "synthesize_along"):
+            raise ValueError(f"method {method!r} does not follow a flow; --flow needs method 'grouplets'")
+        if size is not None or scale is not None:
+            raise click.BadParameter("--flow sets the output size; do not give --size or --scale")
+        flow = _read_flow(flow_file)
     image, label = _load_exemplar(exemplar)
-    if size is not None:
+    if flow is not None:
+        shape = flow.shape[:2]
+    elif size is not None:
         shape = _parse_size(size)
     elif scale is not None:
         if not scale > 0:
@@ -153,7 +181,10 @@ def synth(exemplar, output, method, size, scale, seed, params, source_map, bit_d
     bar = _ProgressBar(f"{method}", enabled=not quiet)
     try:
         synthesizer.fit(image)
-        result = synthesizer.sample_with_map(shape, rng=seed, callback=bar)
+        if flow is not None:
+            result = SynthesisResult(synthesizer.synthesize_along(flow, rng=seed, callback=bar))
+        else:
+            result = synthesizer.sample_with_map(shape, rng=seed, callback=bar)
     finally:
         bar.close()
     write_image(out_path, result.image, bit_depth=depth)

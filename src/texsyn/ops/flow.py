@@ -224,8 +224,8 @@ def builtin_flow(name: str, shape: tuple[int, int]) -> np.ndarray:
     ----------
     name : str
         ``'vortex'`` (rotation about the centre), ``'constant:ANGLE'`` (one direction,
-        ``ANGLE`` in degrees counter-clockwise from the +column axis), ``'sources'`` (a
-        periodic sum of two sources and two vortices), ``'waves'`` (a sinuous horizontal flow).
+        ``ANGLE`` in degrees counter-clockwise from the +column axis), ``'sources'`` (two
+        sources and two vortices), ``'waves'`` (a sinuous horizontal flow).
     shape : (int, int)
 
     Returns
@@ -245,15 +245,16 @@ def builtin_flow(name: str, shape: tuple[int, int]) -> np.ndarray:
             raise ValueError(f"flow 'constant:ANGLE' needs ANGLE in degrees, got {name!r}") from None
         return np.stack([np.full((h, w), -math.sin(angle)), np.full((h, w), math.cos(angle))], axis=-1)
     if key == "sources":
-        # periodic potentials: two sources (gradient flows) and two vortices (rotated gradients)
+        # two sources and two vortices with Gaussian envelopes, on wrapped displacements
         field = np.zeros((h, w, 2))
-        for (cr, cc, kind) in ((0.25, 0.25, "source"), (0.75, 0.75, "source"), (0.25, 0.75, "vortex"), (0.75, 0.25, "vortex")):
-            dr = np.sin(2 * np.pi * (r / h - cr)) / (2 * np.pi) * h
-            dc = np.sin(2 * np.pi * (c / w - cc)) / (2 * np.pi) * w
-            d2 = dr**2 + dc**2 + 1.0
-            weight = np.exp(-d2 / (2 * (0.2 * min(h, w)) ** 2))
+        spread = 0.12 * min(h, w)
+        for cr, cc, kind in ((0.25, 0.25, "source"), (0.75, 0.75, "source"), (0.25, 0.75, "vortex"), (0.75, 0.25, "vortex")):
+            dr = np.mod(r - cr * h + h / 2, h) - h / 2
+            dc = np.mod(c - cc * w + w / 2, w) - w / 2
+            dist = np.sqrt(dr**2 + dc**2) + 1e-9
+            weight = np.exp(-(dist**2) / (2 * spread**2))
             vec = np.stack([dr, dc], axis=-1) if kind == "source" else np.stack([-dc, dr], axis=-1)
-            field += weight[..., None] * vec / np.sqrt(d2)[..., None]
+            field += (weight / dist)[..., None] * vec
         return field
     if key == "waves":
         return np.stack([0.6 * np.cos(2 * np.pi * 2 * c / w), np.ones((h, w))], axis=-1)
