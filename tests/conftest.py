@@ -40,6 +40,7 @@ FAST_PARAMS = {
     "sparse": {"patch_size": 6, "step": 3, "n_scales": 2, "n_atoms": 24, "ksvd_iterations": 2, "n_outer": 3, "n_inner": 3},
     "patch_wavelet": {"sigma": (0.0, 0.2)},
     "grouplets": {"n_iterations": 3, "levels": 2, "grouplet_levels": 3},
+    "portilla_simoncelli": {"n_scales": 2, "n_iterations": 3},
 }
 
 

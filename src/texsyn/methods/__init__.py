@@ -9,13 +9,14 @@ from .grouplets import Frame, Grouplets
 from .heeger_bergen import HeegerBergen
 from .quilting import Quilting
 from .patch_wavelet import Modification, PatchWavelet
+from .portilla_simoncelli import PortillaSimoncelli
 from .random_phase import RandomPhase
 from .sparse import ConstrainedSparse
 from .wavelet_sampling import ComplexWaveletSampling
 from .wei_levoy import WeiLevoy
 
 METHODS: dict[str, type[TextureSynthesizer]] = {
-    cls.name: cls for cls in (Quilting, EfrosLeung, HeegerBergen, RandomPhase, LG, CLG, RCLG, MSLG, ConstrainedSparse, ComplexWaveletSampling, WeiLevoy, PatchWavelet, Grouplets)
+    cls.name: cls for cls in (Quilting, EfrosLeung, HeegerBergen, RandomPhase, LG, CLG, RCLG, MSLG, ConstrainedSparse, ComplexWaveletSampling, WeiLevoy, PatchWavelet, Grouplets, PortillaSimoncelli)
 }
 
 __all__ = [
@@ -33,6 +34,7 @@ __all__ = [
     "HeegerBergen",
     "ParamSpec",
     "PatchWavelet",
+    "PortillaSimoncelli",
     "Progress",
     "Quilting",
     "RandomPhase",

@@ -425,6 +425,11 @@ class MSLG(TextureSynthesizer):
     zoom_boundary : str
         Boundary handling of the Fourier zoom-in: ``'symmetric'`` (mirror extension, no
         border ringing) or ``'periodic'`` (the paper's literal formula).
+    post : str
+        ``'portilla_simoncelli'`` uses the MSLG result as the initial image of a short
+        Portilla-Simoncelli synthesis (Raad et al. 2016, section 5, Fig. 8); ``'none'`` skips it.
+    post_iterations : int
+        Portilla-Simoncelli iterations of the post-processing.
 
     References
     ----------
@@ -446,6 +451,8 @@ class MSLG(TextureSynthesizer):
         mode: Annotated[str, OneOf(("sample", "mean"))] = "sample",
         seed_patch: Annotated[str, OneOf(("gaussian", "copy"))] = "gaussian",
         zoom_boundary: Annotated[str, OneOf(("symmetric", "periodic"))] = "symmetric",
+        post: Annotated[str, OneOf(("none", "portilla_simoncelli"))] = "none",
+        post_iterations: Annotated[int, Range(1, 500)] = 10,
     ):
         self.patch_size = patch_size
         self.n_neighbors = n_neighbors
@@ -453,6 +460,8 @@ class MSLG(TextureSynthesizer):
         self.mode = mode
         self.seed_patch = seed_patch
         self.zoom_boundary = zoom_boundary
+        self.post = post
+        self.post_iterations = post_iterations
 
     def _check_params(self) -> None:
         super()._check_params()
@@ -482,6 +491,13 @@ class MSLG(TextureSynthesizer):
             high = scales[k] - low
             stacked = np.concatenate([scales[k], low], axis=2)
             self.fine_sources_.append(_PatchSource(stacked, high, n))
+        self.post_ = None
+        if self.post == "portilla_simoncelli":
+            from .portilla_simoncelli import PortillaSimoncelli
+
+            side = min(exemplar.shape[:2])
+            scales = int(max(1, min(4, np.floor(np.log2(side)) - 1)))
+            self.post_ = PortillaSimoncelli(n_scales=scales, n_iterations=self.post_iterations).fit(exemplar)
 
     def _sample(self, shape, rng, callback):
         n, big = self.patch_size, 2 ** (self.n_scales - 1)
@@ -519,7 +535,14 @@ class MSLG(TextureSynthesizer):
         for k in range(self.n_scales - 2, -1, -1):
             low = zoom_in(out, boundary=self.zoom_boundary)
             out = self._fine_scale(low, self.fine_sources_[k], m, rng, reporter(self.n_scales - 1 - k))
-        return out[: shape[0], : shape[1]], None
+        out = out[: shape[0], : shape[1]]
+        if self.post_ is not None:
+            report = None
+            if callback is not None:
+                def report(p):
+                    callback(Progress("portilla_simoncelli", p.done, p.total, image=p.image))
+            out = self.post_.refine(np.clip(out, 0.0, 1.0), callback=report)
+        return out, None
 
     def _fine_scale(self, low, source: _PatchSource, m, rng, report) -> np.ndarray:
         """Alg. 3 lines 5-17: high frequencies sampled on top of the zoomed-in result."""

@@ -23,6 +23,7 @@ from .patches import (
     source_map_regions,
     synthesis_map,
 )
+from .statistics import ps_distance, ps_statistics
 from .texture import (
     histogram_distance,
     mean_gradient,
@@ -43,6 +44,8 @@ __all__ = [
     "mean_gradient",
     "nearest_patch_field",
     "patch_coherence",
+    "ps_distance",
+    "ps_statistics",
     "radial_log_spectrum",
     "sharpness_ratio",
     "spectrum_distance",
@@ -60,6 +63,7 @@ METRIC_DESCRIPTIONS = {
     "largest_copy": "largest verbatim-copied region, as a share of the output",
     "copied_share": "share of the output inside copied regions of at least 16x16 pixels",
     "sharpness_ratio": "mean gradient magnitude, output over exemplar (1 = as sharp)",
+    "ps_distance": "relative distance of the Portilla-Simoncelli statistics, mean over families (0 = same)",
 }
 
 
@@ -83,4 +87,5 @@ def evaluate(
         "largest_copy": copies.largest,
         "copied_share": copies.copied_share,
         "sharpness_ratio": sharpness_ratio(image, exemplar),
+        "ps_distance": ps_distance(image, exemplar),
     }
