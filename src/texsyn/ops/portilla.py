@@ -217,8 +217,8 @@ def impose_autocorrelation(x: np.ndarray, target: np.ndarray) -> np.ndarray:
     if lag == 0:
         cur = np.mean(x**2, axis=(-2, -1), keepdims=True)
         return x * np.sqrt(target[..., :1, :1] / np.where(cur > 0, cur, 1.0))
-    spec = sfft.rfft2(x)
-    cx = sfft.irfft2(spec.real**2 + spec.imag**2, s=(h, w)) / (h * w)
+    spec = sfft.rfft2(x.astype(np.float32))
+    cx = sfft.irfft2(spec.real**2 + spec.imag**2, s=(h, w)).astype(np.float64) / (h * w)
     half = _half_offsets(lag)
     diff = half[:, None, :] - half[None, :, :]
     summ = half[:, None, :] + half[None, :, :]
@@ -233,8 +233,8 @@ def impose_autocorrelation(x: np.ndarray, target: np.ndarray) -> np.ndarray:
     ch = np.zeros(batch + (h, w))
     ch[..., half[:, 0] % h, half[:, 1] % w] = coef
     ch[..., -half[:, 0] % h, -half[:, 1] % w] = coef
-    gain = np.sqrt(np.abs(sfft.rfft2(ch).real))
-    return sfft.irfft2(spec * gain, s=(h, w))
+    gain = np.sqrt(np.abs(sfft.rfft2(ch.astype(np.float32)).real))
+    return sfft.irfft2(spec * gain, s=(h, w)).astype(np.float64)
 
 
 _HALF_OFFSETS: dict = {}
@@ -359,16 +359,16 @@ def adjust_cross_correlation(x: np.ndarray, target: np.ndarray, y: np.ndarray, t
     residual is rescaled to the target residual covariance (clipped to be positive).
     """
     n, k = x.shape
-    z = np.concatenate([x, y], axis=1)
-    gram = z.T @ z / n
+    rows = np.concatenate([x.T, y.T], axis=0)  # (k + m, N), contiguous rows for BLAS
+    gram = rows @ rows.T / n
     bxx, bxy, byy = gram[:k, :k], gram[:k, k:], gram[k:, k:]
     ibyy = np.linalg.pinv(byy)
     regression = ibyy @ bxy.T  # (m, k)
     current = bxx - bxy @ regression
     desired = target - target_xy @ ibyy @ target_xy.T
     m = _sqrtm(current, inverse=True) @ _sqrtm(desired)
-    # (x - y regression) m + y ibyy target_xy^T, with two products of N-row matrices
-    return x @ m + y @ (ibyy @ target_xy.T - regression @ m)
+    # (x - y regression) m + y ibyy target_xy^T, with two products of N-column matrices
+    return (m.T @ rows[:k] + (ibyy @ target_xy.T - regression @ m).T @ rows[k:]).T
 
 
 # ---------------------------------------------------------------------- the statistics
@@ -562,8 +562,8 @@ def _fix_low(images: np.ndarray, autocorr: np.ndarray, skew_kurt: np.ndarray, pi
 def _impose_parent_regression(reals: np.ndarray, parents: np.ndarray, target_xp: np.ndarray) -> np.ndarray:
     """Give every column of ``reals`` its target correlation with ``parents``, keeping its variance."""
     n, k = reals.shape
-    z = np.concatenate([reals, parents], axis=1)
-    gram = z.T @ z / n
+    rows = np.concatenate([reals.T, parents.T], axis=0).astype(np.float32)  # (k + m, N)
+    gram = (rows @ rows.T).astype(np.float64) / n
     own = np.diag(gram)[:k]
     cross = gram[k:, :k]  # (m, k): parents^T reals / n
     ibyy = np.linalg.pinv(gram[k:, k:])
@@ -572,7 +572,8 @@ def _impose_parent_regression(reals: np.ndarray, parents: np.ndarray, target_xp:
     current = own - np.einsum("mk,mk->k", cross, regression)
     desired = np.maximum(own - np.einsum("km,mk->k", target_xp, fit), 0.0)
     scale = np.sqrt(desired / np.where(current > 0, current, 1.0))
-    return reals * scale + parents @ (fit - regression * scale)
+    mix = (fit - regression * scale).T.astype(np.float32)
+    return (rows[:k] * scale[:, None].astype(np.float32) + mix @ rows[k:]).T.astype(np.float64)
 
 
 def ps_synthesis(
