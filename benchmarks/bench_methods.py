@@ -51,6 +51,8 @@ TARGETS = {
     ("patch_wavelet", "colour", 256): 10.0,
     ("grouplets", "colour", 256): 10.0,
     ("grouplets", "grey", 256): 10.0,
+    ("portilla_simoncelli", "grey", 256): 3.0,
+    ("portilla_simoncelli", "colour", 256): 8.0,
 }
 
 
