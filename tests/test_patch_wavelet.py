@@ -276,11 +276,14 @@ def test_equalisation_matches_the_inputs_colours(brick):
 
 def test_cli_modify_writes_the_texture_and_the_magnitudes(tmp_path, capsys):
     out, mags = tmp_path / "m.png", tmp_path / "mag.npy"
-    code = main(["modify", "builtin:gravel", "-e", "builtin:brick", "-r", "0.2", "-o", str(out), "--magnitudes", str(mags), "-q", "-p", "lle_points=256"])
+    where = tmp_path / "where.npy"
+    code = main(["modify", "builtin:gravel", "-e", "builtin:brick", "-r", "0.2", "-o", str(out), "--magnitudes", str(mags), "--source-map", str(where), "-q", "-p", "lle_points=256"])
     err = capsys.readouterr().err
     assert code == 0, err
     assert read_image(out).shape == (128, 128)
     assert np.load(mags).shape == (128, 128)
+    positions = np.load(where)
+    assert positions.shape == (128, 128, 2) and positions.min() >= 0 and positions.max() < 128
 
 
 @pytest.mark.parametrize(

@@ -204,13 +204,14 @@ def synth(exemplar, output, method, size, scale, seed, params, source_map, bit_d
 @click.option("-r", "--ratio", type=float, default=0.5, show_default=True, help="Threshold as a fraction of the largest detail: 0 rebuilds INPUT, 1 is a pure synthesis.")
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Output image (.png, .jpg, .tif).")
 @click.option("--magnitudes", type=click.Path(dir_okay=False), help="Also write the kept detail magnitudes packed like a wavelet transform: a .npy array, or a .png/.tif picture (square root of magnitude / largest).")
+@click.option("--source-map", type=click.Path(dir_okay=False), help="Also write the exemplar position of every output pixel (.npy array, or a .png/.tif position-colour picture).")
 @click.option("--no-equalize", is_flag=True, help="Do not match the exemplar's colours to INPUT first.")
 @click.option("--boundary", type=click.Choice(["symmetric", "periodic"]), default="symmetric", show_default=True, help="Border rule of the transform (periodic for an INPUT that tiles).")
 @click.option("--per-level", is_flag=True, help="Threshold every level against its own largest detail.")
 @click.option("-p", "--param", "params", multiple=True, metavar="NAME=VALUE", help="Parameter of the patch_wavelet method (repeatable).")
 @click.option("--bit-depth", type=click.Choice(["8", "16"]), default="8", show_default=True, help="Bits per sample of the output (16 for PNG/TIFF).")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
-def modify(input_image, exemplar, ratio, output, magnitudes, no_equalize, boundary, per_level, params, bit_depth, quiet):
+def modify(input_image, exemplar, ratio, output, magnitudes, source_map, no_equalize, boundary, per_level, params, bit_depth, quiet):
     """Modify the texture INPUT (an image file or builtin:NAME) toward EXEMPLAR (Peyré 2007).
 
     INPUT is expressed with the exemplar's patches and decomposed; wavelet details below
@@ -226,6 +227,12 @@ def modify(input_image, exemplar, ratio, output, magnitudes, no_equalize, bounda
             mag_path = check_output_path(magnitudes, formats={".npy": (8,)})
         else:
             mag_path = check_output_path(magnitudes)
+    map_path = None
+    if source_map is not None:
+        if Path(source_map).suffix.lower() == ".npy":
+            map_path = check_output_path(source_map, formats={".npy": (8,)})
+        else:
+            map_path = check_output_path(source_map)
     parameters = _parse_params("patch_wavelet", params)
     method = make_method("patch_wavelet", **parameters)
     texture, _ = _load_exemplar(input_image)
@@ -245,6 +252,11 @@ def modify(input_image, exemplar, ratio, output, magnitudes, no_equalize, bounda
         else:
             top = result.magnitudes.max()
             write_image(mag_path, np.sqrt(result.magnitudes / top) if top > 0 else result.magnitudes)
+    if map_path is not None:
+        if map_path.suffix.lower() == ".npy":
+            write_array(map_path, result.source_map)
+        else:
+            write_image(map_path, position_colors(result.source_map, image.shape[:2]))
     if not quiet:
         h, w = result.image.shape[:2]
         click.echo(f"wrote {out_path} ({w}x{h}, ratio {ratio:g}, exemplar {label})", err=True)
