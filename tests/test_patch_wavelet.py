@@ -309,3 +309,9 @@ def test_cli_modify_bad_input_is_one_line_and_writes_nothing(tmp_path, capsys, a
     assert code == 2
     assert err.count("\n") == 1 and message in err
     assert not out.exists()
+
+
+def test_exemplars_too_large_for_the_indexes_are_refused(monkeypatch, brick):
+    monkeypatch.setenv("TEXSYN_MEMORY_LIMIT", "1M")
+    with pytest.raises(MemoryError, match="patch indexes"):
+        texsyn.make_method("patch_wavelet").fit(brick)

@@ -21,7 +21,7 @@ from typing import Annotated, Callable, Sequence
 
 import numpy as np
 
-from .._validation import OneOf, Range, as_exemplar
+from .._validation import OneOf, Range, as_exemplar, memory_limit_bytes
 from ..ops import as_channels, match_histogram
 from ..ops.patch_wavelet import PatchWaveletCoefficients, PatchWaveletTransform
 from ._base import Progress, TextureSynthesizer
@@ -151,7 +151,22 @@ class PatchWavelet(TextureSynthesizer):
     def _fit(self, exemplar: np.ndarray) -> None:
         # descriptors and search indexes of every width; the LLE embeddings are computed on
         # first use (only random details and modification need them) and kept.
-        self.transform_ = self._make_transform(exemplar).prepare()
+        transform = self._make_transform(exemplar)
+        self._check_index_memory(transform)
+        self.transform_ = transform.prepare()
+
+    @staticmethod
+    def _check_index_memory(transform: PatchWaveletTransform) -> None:
+        """Refuse exemplars whose float32 search indexes would not fit in memory."""
+        h, w = transform.exemplar_shape
+        need = sum(4.0 * h * w * transform.windows.dimension(width) for width in transform.widths())
+        limit = memory_limit_bytes()
+        if need > limit:
+            raise MemoryError(
+                f"exemplar of {w}x{h} pixels needs about {need / 2**30:.1f} GiB of patch indexes for "
+                f"method 'patch_wavelet', more than the {limit / 2**30:.1f} GiB allowed; use a smaller "
+                "exemplar, a smaller max_resolution, or set TEXSYN_MEMORY_LIMIT"
+            )
 
     def sigma_profile(self, levels: int) -> np.ndarray:
         """``sigma_j`` for ``j = 1 ... levels`` (finest first)."""
