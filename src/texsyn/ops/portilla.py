@@ -101,6 +101,15 @@ class ComplexSteerablePyramid:
             self.half_planes.append(np.stack(halves).astype(rd))
         self.lo0 = self.lo0.astype(self.real_dtype)
         self.hi0 = self.hi0.astype(self.real_dtype)
+        # L(r/2) at every level's resolution: the low-pass that the partially reconstructed
+        # images of Portilla-Simoncelli carry (paper section 3.1; the MATLAB code's lo0 mask).
+        # Level s + 1 takes level s's low-pass window at the same frequency indices, which keeps
+        # the reconstruction exact for odd sizes too (where the grids are not exactly 2x apart).
+        self.mid = [self.lo0]
+        for level in range(self.n_scales):
+            rows = _crop_indices(self.sizes[level][0], self.sizes[level + 1][0])
+            cols = _crop_indices(self.sizes[level][1], self.sizes[level + 1][1])
+            self.mid.append(self.lo[level][rows[:, None], cols[None, :]])
 
     def _fft(self, x):
         x = np.asarray(x)
@@ -157,18 +166,27 @@ class ComplexSteerablePyramid:
         lows.append(self._ifft(low).real)
         return (highpass, bands, lows, band_spectra) if spectra else (highpass, bands, lows)
 
+    def lowpass_image(self, residual: np.ndarray) -> np.ndarray:
+        """The coarsest partially reconstructed image: the low-pass residual filtered by ``L(r/2)``."""
+        return self._ifft(self._fft(residual) * self.mid[-1]).real
+
     def reconstruct_level(self, coarser: np.ndarray, real_bands: np.ndarray, level: int, *, real_spectra=None) -> np.ndarray:
-        """The low-pass image of ``level`` from the one below it and the level's real bands
-        (or their Fourier transforms ``real_spectra``)."""
-        spec = self.resize_spectrum(self._fft(coarser), self.sizes[level + 1], self.sizes[level]) * self.lo[level]
+        """Partially reconstructed image of ``level`` from the one of the level below and the
+        level's real bands (or their Fourier transforms ``real_spectra``).
+
+        Both images carry the low-pass ``L(r/2)`` of their own resolution (Portilla and
+        Simoncelli's partially reconstructed low-pass images), so the finest one is the
+        image's low-pass part and :meth:`reconstruct` only adds the high-pass residual.
+        """
+        spec = self.resize_spectrum(self._fft(coarser), self.sizes[level + 1], self.sizes[level])
         if real_spectra is None:
             real_spectra = self._fft(real_bands)
         spec = spec + np.sum(real_spectra * np.conj(self.real_filters[level]), axis=-3)
-        return self._ifft(spec).real
+        return self._ifft(spec * self.mid[level]).real
 
     def reconstruct(self, low0: np.ndarray, highpass: np.ndarray) -> np.ndarray:
-        """The image from the level-0 low-pass image and the high-pass residual."""
-        return self._ifft(self._fft(low0) * self.lo0 + self._fft(highpass) * self.hi0).real
+        """The image from the finest partially reconstructed image and the high-pass residual."""
+        return self._ifft(self._fft(low0) + self._fft(highpass) * self.hi0).real
 
     def analytic(self, real_bands: np.ndarray, level: int, *, real_spectra=None):
         """Re-create the complex bands ``(..., K, h, w)`` from their real parts; returns
@@ -495,7 +513,7 @@ def ps_statistics(
     lows[-1] = lows[-1] - lows[-1].mean(axis=(-2, -1), keepdims=True)
     # partially reconstructed low-pass images, coarse to fine
     partial = [None] * (pyramid.n_scales + 1)
-    partial[-1] = lows[-1]
+    partial[-1] = pyramid.lowpass_image(lows[-1])
     for s in range(pyramid.n_scales - 1, -1, -1):
         partial[s] = pyramid.reconstruct_level(partial[s + 1], bands[s].real, s)
     low_sk = np.stack([np.stack(_moments(p)[2:], axis=-1) for p in partial], axis=1)
@@ -608,7 +626,7 @@ def ps_synthesis(
         highpass, bands, lows, spectra = pyramid.forward(x, spectra=True, all_lows=False)
         low = lows[-1] - lows[-1].mean(axis=(-2, -1), keepdims=True)
         lows[-1] = low
-        image = _fix_low(low, target.low_autocorr[n_scales], target.low_skew_kurt[:, n_scales], var0, lags)
+        image = _fix_low(pyramid.lowpass_image(low), target.low_autocorr[n_scales], target.low_skew_kurt[:, n_scales], var0, lags)
         for s in range(n_scales - 1, -1, -1):
             band = bands[s]
             k = band.shape[1]
