@@ -357,7 +357,11 @@ class Grouplets(TextureSynthesizer):
         generator = normalize_rng(rng)
         model: GroupletModel = self.model_
         velocity = self.initial_velocity(shape, generator)
-        texture = model.project(model.noise(shape, generator), model.transform(velocity), self.n_iterations)
+        first = None
+        if callback is not None:
+            def first(k, _f):
+                callback(Progress("first frame", k, self.n_iterations))
+        texture = model.project(model.noise(shape, generator), model.transform(velocity), self.n_iterations, first)
         for index in range(int(n_frames)):
             if index > 0:
                 texture = advect(texture, velocity, self.tau)
@@ -378,7 +382,7 @@ class Grouplets(TextureSynthesizer):
 
         def report(progress):
             if callback is not None:
-                callback(Progress("frames", progress.done, total))
+                callback(progress if progress.stage != "frames" else Progress("frames", progress.done, total))
 
         head = []
         for frame in self.animate(total, shape, rng=rng, callback=report):
