@@ -13,12 +13,10 @@ Images are handled channel-first internally, ``(C, H, W)``.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from math import factorial
-
 import numpy as np
 import scipy.fft as sfft
 
-from .steerable import _crop_indices, _half_size, _log_transition
+from .steerable import _crop_indices, oriented_windows, pyramid_sizes, radial_lowpass
 
 __all__ = [
     "ComplexSteerablePyramid",
@@ -71,34 +69,25 @@ class ComplexSteerablePyramid:
                 f"image of {self.shape[1]}x{self.shape[0]} pixels is too small for {self.n_scales} "
                 f"scales; need at least {2 ** (self.n_scales + 1)} pixels per side"
             )
-        self.sizes = [self.shape]
-        for _ in range(self.n_scales):
-            h, w = self.sizes[-1]
-            self.sizes.append((_half_size(h), _half_size(w)))
-        alpha = 2.0 ** (k - 1) * factorial(k - 1) / np.sqrt(k * factorial(2 * (k - 1)))
-        phase = (-1j) ** (k - 1)
+        self.sizes = pyramid_sizes(self.shape, self.n_scales)
         r0, _ = self._polar(self.shape)
-        self.lo0 = _log_transition(r0 / 2.0)
+        self.lo0 = radial_lowpass(r0 / 2.0)
         self.hi0 = np.sqrt(np.maximum(1.0 - self.lo0**2, 0.0))
         self.lo, self.real_filters, self.analytic_filters, self.half_planes = [], [], [], []
         for size in self.sizes[: self.n_scales]:
             r, theta = self._polar(size)
-            lo = _log_transition(r)
-            hi = np.sqrt(np.maximum(1.0 - lo**2, 0.0))
-            reals, analytic, halves = [], [], []
-            for b in range(k):
-                c = np.cos(theta - np.pi * b / k)
-                real = phase * alpha * c ** (k - 1) * hi
-                half = np.where(c > 1e-12, 2.0, np.where(c < -1e-12, 0.0, 1.0))
-                half[0, 0] = 1.0
-                reals.append(real)
-                analytic.append(real * half)
-                halves.append(half)
+            lo = radial_lowpass(r)
+            reals = oriented_windows(theta, np.sqrt(np.maximum(1.0 - lo**2, 0.0)), k)
+            # analytic bands: the half plane each orientation points to, doubled
+            c = np.cos(theta[None] - (np.pi * np.arange(k) / k)[:, None, None])
+            halves = np.where(c > 1e-12, 2.0, np.where(c < -1e-12, 0.0, 1.0))
+            halves[:, 0, 0] = 1.0
+            analytic = reals * halves
             rd, cd = self.real_dtype, np.result_type(self.real_dtype, np.complex64)
             self.lo.append(lo.astype(rd))
-            self.real_filters.append(np.stack(reals).astype(cd))
-            self.analytic_filters.append(np.stack(analytic).astype(cd))
-            self.half_planes.append(np.stack(halves).astype(rd))
+            self.real_filters.append(reals.astype(cd))
+            self.analytic_filters.append(analytic.astype(cd))
+            self.half_planes.append(halves.astype(rd))
         self.lo0 = self.lo0.astype(self.real_dtype)
         self.hi0 = self.hi0.astype(self.real_dtype)
         # L(r/2) at every level's resolution: the low-pass that the partially reconstructed

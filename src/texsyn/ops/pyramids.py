@@ -5,7 +5,9 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-__all__ = ["gaussian_blur", "zoom_out", "zoom_in", "gaussian_pyramid", "crop_to_multiple"]
+from .steerable import radial_lowpass
+
+__all__ = ["LaplacianTightFrame", "crop_to_multiple", "gaussian_blur", "gaussian_pyramid", "zoom_in", "zoom_out"]
 
 
 def gaussian_blur(image: np.ndarray, sigma: float, *, mode: str = "symmetric") -> np.ndarray:
@@ -117,14 +119,7 @@ class LaplacianTightFrame:
         kc = np.fft.rfftfreq(w)[None, :]
         radius = 2 * np.pi * np.sqrt(kr**2 + kc**2)
 
-        def lowpass(r):
-            out = np.zeros_like(r)
-            out[r <= np.pi / 4] = 1.0
-            mid = (r > np.pi / 4) & (r < np.pi / 2)
-            out[mid] = np.cos(np.pi / 2 * np.log2(4 * r[mid] / np.pi))
-            return out
-
-        phis = [np.ones_like(radius)] + [lowpass(2 ** (j - 1) * radius) for j in range(1, self.levels + 1)]
+        phis = [np.ones_like(radius)] + [radial_lowpass(2 ** (j - 1) * radius) for j in range(1, self.levels + 1)]
         self.filters = np.stack(
             [np.sqrt(np.maximum(phis[j] ** 2 - phis[j + 1] ** 2, 0.0)) for j in range(self.levels)] + [phis[-1]]
         )

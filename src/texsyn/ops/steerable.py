@@ -22,7 +22,7 @@ from math import factorial
 
 import numpy as np
 
-__all__ = ["SteerablePyramid", "Pyramid"]
+__all__ = ["Pyramid", "SteerablePyramid", "oriented_windows", "pyramid_sizes", "radial_lowpass"]
 
 
 @dataclass
@@ -73,8 +73,12 @@ class Pyramid:
         return [(k, self[k]) for k in self.keys()]
 
 
-def _log_transition(r: np.ndarray) -> np.ndarray:
-    """Low-pass radial window ``L(r)``: 1 below pi/4, 0 above pi/2, cosine in log2 between."""
+def radial_lowpass(r: np.ndarray) -> np.ndarray:
+    """Low-pass radial window ``L(r)``: 1 below pi/4, 0 above pi/2, cosine in log2 between.
+
+    The window of the steerable pyramid (Portilla and Simoncelli 2000, section 2.1) and of
+    the Laplacian tight frame (spec 00, 4.4); ``r`` in radians per pixel.
+    """
     with np.errstate(divide="ignore"):
         lg = np.log2(np.maximum(r, 1e-300) * 4.0 / np.pi)
     out = np.cos(0.5 * np.pi * np.clip(lg, 0.0, 1.0))
@@ -89,6 +93,27 @@ def _crop_indices(n_fine: int, n_coarse: int) -> np.ndarray:
     """Rows of a size-``n_fine`` FFT that hold the frequencies of a size-``n_coarse`` FFT."""
     k = np.fft.fftfreq(n_coarse, 1.0 / n_coarse).astype(np.int64)
     return np.mod(k, n_fine)
+
+
+def pyramid_sizes(shape: tuple[int, int], n_scales: int) -> list[tuple[int, int]]:
+    """Sizes of the levels ``0 ... n_scales`` (each the previous one halved, rounded up)."""
+    sizes = [(int(shape[0]), int(shape[1]))]
+    for _ in range(n_scales):
+        h, w = sizes[-1]
+        sizes.append((_half_size(h), _half_size(w)))
+    return sizes
+
+
+def oriented_windows(theta: np.ndarray, highpass: np.ndarray, n_orientations: int) -> np.ndarray:
+    """The ``K`` oriented band filters ``(-i)^(K-1) alpha cos^(K-1)(theta - pi b / K) H(r)``.
+
+    ``alpha`` makes ``sum_b |G_b|^2 = H^2`` (Simoncelli and Freeman 1995). Returns ``(K, ...)``.
+    """
+    k = int(n_orientations)
+    alpha = 2.0 ** (k - 1) * factorial(k - 1) / np.sqrt(k * factorial(2 * (k - 1)))
+    angles = np.pi * np.arange(k) / k
+    cosines = np.cos(theta[None] - angles.reshape((k,) + (1,) * theta.ndim))
+    return (-1j) ** (k - 1) * alpha * cosines ** (k - 1) * highpass[None]
 
 
 class SteerablePyramid:
@@ -126,16 +151,10 @@ class SteerablePyramid:
                 f"image of {self.shape[1]}x{self.shape[0]} pixels is too small for "
                 f"{self.n_scales} scales; need at least {2**self.n_scales} pixels per side"
             )
-        k = self.n_orientations
-        self._alpha = 2.0 ** (k - 1) * factorial(k - 1) / np.sqrt(k * factorial(2 * (k - 1)))
-        self._phase = (-1j) ** (k - 1)
-        self.sizes = [self.shape]
-        for _ in range(self.n_scales):
-            h, w = self.sizes[-1]
-            self.sizes.append((_half_size(h), _half_size(w)))
+        self.sizes = pyramid_sizes(self.shape, self.n_scales)
         self._filters = [self._level_filters(s) for s in self.sizes[: self.n_scales]]
         r0, _ = self._polar(self.shape)
-        self._lo0 = _log_transition(r0 / 2.0)
+        self._lo0 = radial_lowpass(r0 / 2.0)
         self._hi0 = np.sqrt(np.maximum(1.0 - self._lo0**2, 0.0))
 
     @staticmethod
@@ -146,13 +165,9 @@ class SteerablePyramid:
 
     def _level_filters(self, shape: tuple[int, int]):
         r, theta = self._polar(shape)
-        lo = _log_transition(r)
+        lo = radial_lowpass(r)
         hi = np.sqrt(np.maximum(1.0 - lo**2, 0.0))
-        bands = []
-        for b in range(self.n_orientations):
-            ang = np.cos(theta - np.pi * b / self.n_orientations) ** (self.n_orientations - 1)
-            bands.append(self._phase * self._alpha * ang * hi)
-        return lo, bands
+        return lo, list(oriented_windows(theta, hi, self.n_orientations))
 
     @staticmethod
     def _bcast(filt: np.ndarray, ndim: int) -> np.ndarray:
