@@ -122,7 +122,7 @@ def main(argv: list[str] | None = None) -> int:
         ex = ex[:128, :128]
         t0 = time.perf_counter()
         method = texsyn.make_method("patch_wavelet").fit(ex)
-        single = method.modify(texture, 0.1)
+        method.modify(texture, 0.1)
         t1 = time.perf_counter()
         results = method.modify(texture, list(RATIOS))
         t2 = time.perf_counter()

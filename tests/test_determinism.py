@@ -1,11 +1,8 @@
 """Same seed, same texture, whatever the number of threads (DESIGN.md convention 4)."""
 
-import hashlib
 import os
 import subprocess
 import sys
-
-import pytest
 
 import texsyn
 

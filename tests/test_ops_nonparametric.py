@@ -1,5 +1,4 @@
 import numpy as np
-import pytest
 
 from texsyn.ops.nonparametric import grow_texture, schedule_batches
 

@@ -9,7 +9,6 @@ from texsyn.io import read_image
 from texsyn.ops import NearestPatchIndex, extend_index, knn_patches, wrap_seam_ratio
 from texsyn.ops.patch_wavelet import (
     ExemplarWindows,
-    PatchWaveletCoefficients,
     PatchWaveletTransform,
     lle_embedding,
 )

@@ -335,13 +335,17 @@ class TextureSynthesizer:
         out_shape = check_output_shape(shape, bytes_per_pixel=self.bytes_per_pixel * channels)
         generator = normalize_rng(rng)
         image, source = self._sample(out_shape, generator, callback)
-        image = np.asarray(image)
-        if image.ndim == 3 and ex.ndim == 2:
-            image = image[..., 0]
-        result = np.clip(image, 0.0, 1.0).astype(np.float32)
+        result = self._as_output(image)
         if source is not None:
             source = np.asarray(source, dtype=np.int32)
         return SynthesisResult(image=result, source_map=source)
+
+    def _as_output(self, image: np.ndarray) -> np.ndarray:
+        """An image as methods return it: the exemplar's rank, float32 clipped to [0, 1]."""
+        image = np.asarray(image)
+        if image.ndim == 3 and self._require_fitted().ndim == 2:
+            image = image[..., 0]
+        return np.clip(image, 0.0, 1.0).astype(np.float32)
 
     def _sample(
         self,

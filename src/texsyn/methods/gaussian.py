@@ -39,6 +39,7 @@ from ..ops import (
     zoom_out,
 )
 from ..ops.gaussian import local_gaussian
+from ..ops.portilla import max_scales
 from ._base import Progress, TextureSynthesizer
 
 __all__ = ["LG", "CLG", "RCLG", "MSLG", "gaussian_resample", "raster_positions"]
@@ -495,8 +496,7 @@ class MSLG(TextureSynthesizer):
         if self.post == "portilla_simoncelli":
             from .portilla_simoncelli import PortillaSimoncelli
 
-            side = min(exemplar.shape[:2])
-            scales = int(max(1, min(4, np.floor(np.log2(side)) - 1)))
+            scales = max_scales(exemplar.shape[:2])
             self.post_ = PortillaSimoncelli(n_scales=scales, n_iterations=self.post_iterations).fit(exemplar)
 
     def _sample(self, shape, rng, callback):

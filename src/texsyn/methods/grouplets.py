@@ -23,16 +23,13 @@ import numpy as np
 from scipy.ndimage import gaussian_filter
 
 from .._validation import OneOf, Range, check_output_shape, normalize_rng
-from ..ops import ColorPCA, as_channels, hist_target, match_sorted_rows, periodic_smooth_decomposition
+from ..ops import ColorPCA, hist_target, luma, match_sorted_rows, periodic_smooth_decomposition
 from ..ops.flow import association_fields, builtin_flow, orient_field, structure_tensor_orientation
 from ..ops.fluid import advect, diffuse, project, rescale_speed
 from ..ops.grouplets import WaveletGroupletTransform
 from ._base import Progress, TextureSynthesizer
 
 __all__ = ["Frame", "Grouplets", "GroupletModel"]
-
-_LUMA = np.array([0.299, 0.587, 0.114])
-
 
 @dataclass(frozen=True)
 class Frame:
@@ -77,24 +74,21 @@ class GroupletModel:
     """
 
     def __init__(self, exemplar: np.ndarray, *, levels: int = 3, grouplet_levels: int = 4, sigma: float = 5.0, presmooth: float = 1.0, colour: str = "pca"):
-        ex = as_channels(np.asarray(exemplar, dtype=np.float64))
+        img = np.asarray(exemplar, dtype=np.float64)  # (H, W) or (H, W, 3)
         self.levels = int(levels)
         self.grouplet_levels = int(grouplet_levels)
-        self.output_channels = ex.shape[2] if colour == "pca" else 1
-        if ex.shape[2] == 3 and colour == "pca":
-            self.pca: ColorPCA | None = ColorPCA(ex)
-            coords = self.pca.forward(ex)
-            grey = ex @ _LUMA
+        # one periodic component (Moisan) serves the geometry and the statistics: the
+        # decomposition is linear and keeps the mean, so it commutes with luma and colour PCA
+        periodic_img = periodic_smooth_decomposition(img)[0]
+        if img.ndim == 3 and colour == "pca":
+            self.pca: ColorPCA | None = ColorPCA(img)
+            coords, periodic = self.pca.forward(img), self.pca.forward(periodic_img)
         else:
             self.pca = None
-            grey = ex @ _LUMA if ex.shape[2] == 3 else ex[..., 0]
-            coords = grey[..., None]
-        periodic = periodic_smooth_decomposition(coords)[0]
-        orientation, self.coherence = structure_tensor_orientation(
-            periodic_smooth_decomposition(grey)[0], sigma=sigma, presmooth=presmooth
-        )
+            coords, periodic = luma(img)[..., None], luma(periodic_img)[..., None]
+        orientation, self.coherence = structure_tensor_orientation(luma(periodic_img), sigma=sigma, presmooth=presmooth)
         self.flow = orient_field(orientation)
-        self.shape = ex.shape[:2]
+        self.shape = img.shape[:2]
         transform = self.transform(self.flow)
         coefficients = transform.forward(periodic)  # (J+1, L+1, C, H, W)
         b = coefficients.reshape(coefficients.shape[:3] + (-1,))
@@ -287,29 +281,23 @@ class Grouplets(TextureSynthesizer):
         if flow.ndim != 3 or flow.shape[2] != 2:
             raise ValueError(f"flow must have shape (H, W, 2), got {flow.shape}")
         check_output_shape(flow.shape[:2], bytes_per_pixel=self.bytes_per_pixel * self.model_.channels)
-        return self._finish(self._along(flow, normalize_rng(rng), callback))
+        return self._as_output(self._along(flow, normalize_rng(rng), callback))
 
     def _along(self, flow, rng, callback):
         model: GroupletModel = self.model_
         transform = model.transform(flow)
-        report = None
-        if callback is not None:
-            def report(k, f):
+        def report(k, f):
+            if callback is not None:
                 callback(Progress("iteration", k, self.n_iterations, image=model.to_image(f)))
+
         channels = model.project(model.noise(flow.shape[:2], rng), transform, self.n_iterations, report)
         return model.to_image(channels)
-
-    def _finish(self, image: np.ndarray) -> np.ndarray:
-        ex = self._require_fitted()
-        if image.ndim == 3 and ex.ndim == 2:
-            image = image[..., 0]
-        return np.clip(image, 0.0, 1.0).astype(np.float32)
 
     # ------------------------------------------------------------------ dynamic synthesis
     def initial_velocity(self, shape: tuple[int, int], rng: np.random.Generator) -> np.ndarray:
         """``V_0``: the projected learned flow, or projected smoothed noise, at RMS ``speed`` (spec 03, 10)."""
         if self.initial_flow == "learned":
-            raw = self.flow_field(shape) if self.flow == "learned" else builtin_flow(self.flow, shape)
+            raw = self.flow_field(shape)
         else:
             width = 0.3 * min(shape)
             raw = np.stack([gaussian_filter(rng.standard_normal(shape), width, mode="wrap") for _ in range(2)], axis=-1)
@@ -357,10 +345,10 @@ class Grouplets(TextureSynthesizer):
         generator = normalize_rng(rng)
         model: GroupletModel = self.model_
         velocity = self.initial_velocity(shape, generator)
-        first = None
-        if callback is not None:
-            def first(k, _f):
+        def first(k, _f):
+            if callback is not None:
                 callback(Progress("first frame", k, self.n_iterations))
+
         texture = model.project(model.noise(shape, generator), model.transform(velocity), self.n_iterations, first)
         for index in range(int(n_frames)):
             if index > 0:
@@ -373,7 +361,7 @@ class Grouplets(TextureSynthesizer):
                 texture = model.project(texture, model.transform(velocity), self.n_projections)
             if callback is not None:
                 callback(Progress("frames", index + 1, int(n_frames)))
-            yield Frame(index, self._finish(model.to_image(texture)), velocity.copy())
+            yield Frame(index, self._as_output(model.to_image(texture)), velocity.copy())
 
     def _looped(self, n_frames, shape, *, rng, callback, overlap):
         if not 0 < overlap < int(n_frames):

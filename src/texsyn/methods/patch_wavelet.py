@@ -22,14 +22,13 @@ from typing import Annotated, Callable, Sequence
 import numpy as np
 
 from .._validation import OneOf, Range, as_exemplar, memory_limit_bytes
-from ..ops import as_channels, match_histogram
+from ..ops import as_channels, luma, match_histogram
 from ..ops.patch_wavelet import PatchWaveletCoefficients, PatchWaveletTransform
 from ._base import Progress, TextureSynthesizer
 
 __all__ = ["Modification", "PatchWavelet"]
 
 _POWERS = (2, 4, 8, 16, 32, 64)
-_LUMA = np.array([0.299, 0.587, 0.114])
 
 
 @dataclass(frozen=True)
@@ -254,7 +253,7 @@ class PatchWavelet(TextureSynthesizer):
         tex = as_channels(np.asarray(as_exemplar(texture, name="texture"), dtype=np.float64))
         ex = as_channels(exemplar)
         if tex.shape[2] != ex.shape[2]:
-            tex = np.repeat(tex, ex.shape[2], axis=2) if tex.shape[2] == 1 else (tex @ _LUMA)[..., None]
+            tex = np.repeat(tex, ex.shape[2], axis=2) if tex.shape[2] == 1 else luma(tex)[..., None]
         h, w = tex.shape[:2]
         n = 2 ** max(1, math.ceil(math.log2(max(h, w))))
         padded = np.pad(tex, ((0, n - h), (0, n - w), (0, 0)), mode="symmetric")
@@ -281,12 +280,9 @@ class PatchWavelet(TextureSynthesizer):
         for r in ratios:
             kept = coefficients.thresholded(float(r), per_level=per_level)
             coords = transform.inverse(kept, callback=stage("synthesis"))[:h, :w]
-            image = transform.image(coords)
-            if exemplar.ndim == 2:
-                image = image[..., 0]
             results.append(
                 Modification(
-                    image=np.clip(image, 0.0, 1.0).astype(np.float32),
+                    image=self._as_output(transform.image(coords)),
                     source_map=coords.astype(np.int32),
                     feature_map=features[:h, :w].astype(np.int32),
                     magnitudes=kept.magnitudes(),

@@ -20,14 +20,11 @@ from typing import Annotated, Callable
 import numpy as np
 
 from .._validation import OneOf, Range, as_exemplar
-from ..ops import ColorPCA, as_channels, periodic_smooth_decomposition
-from ..ops.portilla import ComplexSteerablePyramid, PSStatistics, ps_statistics, ps_synthesis
+from ..ops import ColorPCA, as_channels, luma, periodic_smooth_decomposition
+from ..ops.portilla import ComplexSteerablePyramid, PSStatistics, pixel_statistics, ps_statistics, ps_synthesis
 from ._base import Progress, TextureSynthesizer
 
 __all__ = ["PortillaSimoncelli"]
-
-_LUMA = np.array([0.299, 0.587, 0.114])
-
 
 class PortillaSimoncelli(TextureSynthesizer):
     """Portilla-Simoncelli synthesis by alternating projections onto the joint statistics.
@@ -87,7 +84,7 @@ class PortillaSimoncelli(TextureSynthesizer):
                 img = np.repeat(img, 3, axis=2)
             return np.moveaxis(self.pca_.forward(img), -1, 0)
         if img.shape[2] == 3:
-            img = (img @ _LUMA)[..., None]
+            img = luma(img)[..., None]
         return np.moveaxis(img, -1, 0)
 
     def _to_image(self, channels: np.ndarray) -> np.ndarray:
@@ -100,11 +97,8 @@ class PortillaSimoncelli(TextureSynthesizer):
         coords = self._to_channels(exemplar)
         periodic = periodic_smooth_decomposition(np.moveaxis(coords, 0, -1))[0]
         stats = ps_statistics(periodic, n_scales=self.n_scales, n_orientations=self.n_orientations, lags=self.lags)
-        raw = ps_statistics(np.moveaxis(coords, 0, -1), n_scales=self.n_scales, n_orientations=self.n_orientations, lags=0)
         # pixel statistics of the exemplar itself; everything spatial from its periodic part
-        stats.pixel_moments = raw.pixel_moments
-        stats.pixel_range = raw.pixel_range
-        stats.colour_covariance = raw.colour_covariance
+        stats.pixel_moments, stats.pixel_range, stats.colour_covariance = pixel_statistics(coords)
         self.statistics_: PSStatistics = stats
 
     # ------------------------------------------------------------------ synthesis
@@ -114,10 +108,10 @@ class PortillaSimoncelli(TextureSynthesizer):
 
     def _run(self, initial: np.ndarray, iterations: int, callback) -> np.ndarray:
         pyramid = ComplexSteerablePyramid(initial.shape[1:], self.n_scales, self.n_orientations, single=True)
-        report = None
-        if callback is not None:
-            def report(k, x):
+        def report(k, x):
+            if callback is not None:
                 callback(Progress("iteration", k, iterations, image=self._to_image(x)))
+
         return ps_synthesis(self.statistics_, initial, iterations, lags=self.lags, pyramid=pyramid, callback=report)
 
     def _sample(self, shape, rng, callback):
@@ -144,14 +138,11 @@ class PortillaSimoncelli(TextureSynthesizer):
         -------
         ndarray of float32 in [0, 1], the image's size, the exemplar's channels.
         """
-        ex = self._require_fitted()
+        self._require_fitted()
         img = np.asarray(as_exemplar(image, name="image"), dtype=np.float64)
         h, w = img.shape[:2]
         ch, cw = self._canvas((h, w))
         padded = np.pad(as_channels(img), ((0, ch - h), (0, cw - w), (0, 0)), mode="symmetric")
         iterations = self.n_iterations if n_iterations is None else int(n_iterations)
-        out = self._to_image(self._run(self._to_channels(padded), iterations, callback))[:h, :w]
-        if out.ndim == 3 and ex.ndim == 2:
-            out = out[..., 0]
-        return np.clip(out, 0.0, 1.0).astype(np.float32)
+        return self._as_output(self._to_image(self._run(self._to_channels(padded), iterations, callback))[:h, :w])
 

@@ -7,11 +7,7 @@ any sizes).
 
 from __future__ import annotations
 
-import numpy as np
-
 from .patches import (
-    COPY_TOLERANCE,
-    MIN_COPY_AREA,
     PATCH_SIZE,
     CopyMap,
     NearestPatchField,

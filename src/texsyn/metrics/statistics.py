@@ -2,21 +2,14 @@
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from .._validation import as_exemplar
-from ..ops.portilla import PSStatistics
+from ..ops.portilla import PSStatistics, max_scales
 from ..ops.portilla import ps_statistics as _ps_statistics
 from .texture import check_pair
 
 __all__ = ["ps_distance", "ps_statistics"]
-
-
-def _scales(shape: tuple[int, int], wanted: int) -> int:
-    """The largest number of pyramid scales up to ``wanted`` that an image of ``shape`` supports."""
-    return int(max(1, min(wanted, math.floor(math.log2(max(min(shape), 4))) - 1)))
 
 
 def ps_statistics(image, *, n_scales: int = 4, n_orientations: int = 4, lags: int = 3) -> PSStatistics:
@@ -28,7 +21,7 @@ def ps_statistics(image, *, n_scales: int = 4, n_orientations: int = 4, lags: in
     ``ps_statistics(img).vector()`` is one flat vector; ``.groups()`` splits it by family.
     """
     img = np.asarray(as_exemplar(image, name="image"), dtype=np.float64)
-    scales = _scales(img.shape[:2], n_scales)
+    scales = max_scales(img.shape[:2], n_scales)
     return _ps_statistics(img, n_scales=scales, n_orientations=n_orientations, lags=lags)
 
 
@@ -40,7 +33,7 @@ def ps_distance(image, exemplar, *, n_scales: int = 4, n_orientations: int = 4, 
     mean over families (0 = same statistics, larger when they differ). Images may differ in size.
     """
     img, ex = check_pair(image, exemplar)
-    scales = min(_scales(img.shape[:2], n_scales), _scales(ex.shape[:2], n_scales))
+    scales = min(max_scales(img.shape[:2], n_scales), max_scales(ex.shape[:2], n_scales))
     kwargs = {"n_scales": scales, "n_orientations": n_orientations, "lags": lags}
     a = _ps_statistics(img[..., 0] if img.shape[2] == 1 else img, **kwargs).groups()
     b = _ps_statistics(ex[..., 0] if ex.shape[2] == 1 else ex, **kwargs).groups()

@@ -1,6 +1,6 @@
 """Stateless building blocks shared by every method (spec 00). Each exists once here."""
 
-from .color import ColorPCA, rgb_to_yuv, yuv_to_rgb
+from .color import ColorPCA, luma, rgb_to_yuv, yuv_to_rgb
 from .fourier import periodic_smooth_decomposition
 from .histogram import (
     HistogramMatcher,
@@ -52,6 +52,7 @@ __all__ = [
     "hist_target",
     "knn_patches",
     "knn_select",
+    "luma",
     "match_histogram",
     "match_histogram_pca",
     "match_sorted",

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["rgb_to_yuv", "yuv_to_rgb", "ColorPCA"]
+__all__ = ["rgb_to_yuv", "yuv_to_rgb", "luma", "ColorPCA"]
 
 RGB_TO_YUV = np.array(
     [
@@ -19,6 +19,12 @@ YUV_TO_RGB = np.linalg.inv(RGB_TO_YUV)
 def rgb_to_yuv(image: np.ndarray) -> np.ndarray:
     """Analogue BT.601 YUV of an ``(H, W, 3)`` RGB image (spec 00, 6.1)."""
     return np.asarray(image, dtype=np.float64) @ RGB_TO_YUV.T
+
+
+def luma(image: np.ndarray) -> np.ndarray:
+    """BT.601 luma ``Y`` of an ``(..., 3)`` RGB image; a grey ``(H, W)`` image is returned as is."""
+    img = np.asarray(image, dtype=np.float64)
+    return img @ RGB_TO_YUV[0] if img.ndim == 3 and img.shape[-1] == 3 else img
 
 
 def yuv_to_rgb(image: np.ndarray) -> np.ndarray:

@@ -205,7 +205,7 @@ def graphcut_reassemble(patches: np.ndarray, step: int, shape: tuple[int, int]) 
     V. Kwatra, A. Schodl, I. Essa, G. Turk, A. Bobick, "Graphcut textures", SIGGRAPH 2003;
     Tartavel, Gousseau, Peyre (2013), section 4.1, eq. (8).
     """
-    kr, kc, tau = patches.shape[0], patches.shape[1], patches.shape[2]
+    kr, tau = patches.shape[0], patches.shape[2]
     channels = patches.shape[4]
     height, width = shape
     o = tau - step

@@ -76,9 +76,8 @@ def match_sorted(
     if flat.size != target_sorted.size:
         raise ValueError(f"need {flat.size} target values, got {target_sorted.size}")
     if rng is None:
-        order = np.argsort(flat, kind="stable")
-    else:
-        order = np.lexsort((rng.random(flat.size), flat))
+        return match_sorted_rows(flat[None], np.asarray(target_sorted)[None])[0].reshape(x.shape)
+    order = np.lexsort((rng.random(flat.size), flat))
     out = np.empty(flat.size, dtype=np.float64)
     out[order] = target_sorted
     return out.reshape(x.shape)

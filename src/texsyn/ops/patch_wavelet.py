@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
+from scipy.ndimage import uniform_filter
 
 from .patches import as_channels, wrap_seam_ratio
 from .search import NearestPatchIndex
@@ -33,18 +34,6 @@ __all__ = [
     "PatchWaveletTransform",
     "lle_embedding",
 ]
-
-
-def _box_sums(image: np.ndarray, b: int) -> np.ndarray:
-    """Mean over ``[y, y+b) x [x, x+b)`` of a periodic image, for every ``(y, x)``."""
-    if b == 1:
-        return image
-    padded = np.pad(image, ((0, b - 1), (0, b - 1), (0, 0)), mode="wrap")
-    c = np.cumsum(np.cumsum(padded, axis=0), axis=1)
-    c = np.pad(c, ((1, 0), (1, 0), (0, 0)))
-    h, w = image.shape[:2]
-    total = c[b : b + h, b : b + w] - c[:h, b : b + w] - c[b : b + h, :w] + c[:h, :w]
-    return total / (b * b)
 
 
 class ExemplarWindows:
@@ -100,7 +89,8 @@ class ExemplarWindows:
     def _block_means(self, b: int) -> np.ndarray:
         means = self._means.get(b)
         if means is None:
-            means = _box_sums(self._period_image, b)
+            # mean over [y, y+b) x [x, x+b) of the periodic image, for every (y, x)
+            means = uniform_filter(self._period_image, size=(b, b, 1), mode="wrap", origin=(-(b // 2), -(b // 2), 0))
             self._means[b] = means
         return means
 

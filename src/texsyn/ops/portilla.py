@@ -12,6 +12,8 @@ Images are handled channel-first internally, ``(C, H, W)``.
 
 from __future__ import annotations
 
+import functools
+import math
 from dataclasses import dataclass, field
 import numpy as np
 import scipy.fft as sfft
@@ -27,19 +29,13 @@ __all__ = [
     "impose_autocorrelation",
     "impose_kurtosis",
     "impose_skewness",
+    "max_scales",
     "parent_features",
     "phase_doubled",
+    "pixel_statistics",
     "ps_statistics",
     "ps_synthesis",
 ]
-
-
-def _fft2(x):
-    return sfft.fft2(x)
-
-
-def _ifft2(x):
-    return sfft.ifft2(x)
 
 
 # ---------------------------------------------------------------------- pyramid
@@ -194,7 +190,7 @@ def central_autocorrelation(x: np.ndarray, lags: int) -> np.ndarray:
     """
     h, w = x.shape[-2:]
     lag = max(0, min(lags, min(h, w) // 2 - 1))
-    ac = _ifft2(np.abs(_fft2(x)) ** 2).real / (h * w)
+    ac = sfft.ifft2(np.abs(sfft.fft2(x)) ** 2).real / (h * w)
     rows = np.arange(-lag, lag + 1) % h
     cols = np.arange(-lag, lag + 1) % w
     return ac[..., rows[:, None], cols[None, :]]
@@ -244,16 +240,11 @@ def impose_autocorrelation(x: np.ndarray, target: np.ndarray) -> np.ndarray:
     return sfft.irfft2(spec * gain, s=(h, w)).astype(np.float64)
 
 
-_HALF_OFFSETS: dict = {}
-
-
+@functools.lru_cache(maxsize=None)
 def _half_offsets(lag: int) -> np.ndarray:
     """Lags ``(i, j)`` of a ``(2 lag + 1)^2`` window, one of each ``+/-`` pair, zero first."""
-    found = _HALF_OFFSETS.get(lag)
-    if found is None:
-        pairs = [(i, j) for i in range(-lag, lag + 1) for j in range(-lag, lag + 1) if (i, j) >= (0, 0)]
-        found = _HALF_OFFSETS[lag] = np.array(pairs, dtype=np.int64)
-    return found
+    pairs = [(i, j) for i in range(-lag, lag + 1) for j in range(-lag, lag + 1) if (i, j) >= (0, 0)]
+    return np.array(pairs, dtype=np.int64)
 
 
 def _closest_lambda(num, den, target, power, scale):
@@ -470,6 +461,29 @@ def parent_features(pyramid: ComplexSteerablePyramid, band_spectra: list, lows: 
     return None, np.stack(shifts, axis=1).reshape(5 * low.shape[0], -1).T
 
 
+def pixel_statistics(channels: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pixel statistics of ``(C, H, W)`` channels (paper section 3.1, colour: plus covariance).
+
+    Returns
+    -------
+    moments : (C, 4)  mean, variance, skewness, kurtosis
+    value_range : (C, 2)  minimum and maximum
+    covariance : (C, C)
+    """
+    x = np.asarray(channels, dtype=np.float64)
+    flat = x.reshape(x.shape[0], -1)
+    centred = flat - flat.mean(axis=1, keepdims=True)
+    moments = np.stack(_moments(x), axis=-1)
+    value_range = np.stack([flat.min(axis=1), flat.max(axis=1)], axis=-1)
+    return moments, value_range, centred @ centred.T / centred.shape[1]
+
+
+def max_scales(shape: tuple[int, int], wanted: int = 4) -> int:
+    """The largest number of pyramid scales up to ``wanted`` that an image of ``shape`` supports
+    (:class:`ComplexSteerablePyramid` needs ``2^(scales + 1)`` pixels per side)."""
+    return int(max(1, min(wanted, math.floor(math.log2(max(min(shape), 4))) - 1)))
+
+
 def ps_statistics(
     image: np.ndarray,
     *,
@@ -495,9 +509,7 @@ def ps_statistics(
     x = img[None] if img.ndim == 2 else np.moveaxis(img, -1, 0)
     pyramid = pyramid or ComplexSteerablePyramid(x.shape[1:], n_scales, n_orientations)
     c = x.shape[0]
-    mean, var, skew, kurt = _moments(x)
-    flat = x.reshape(c, -1)
-    centred = flat - flat.mean(axis=1, keepdims=True)
+    moments, value_range, covariance = pixel_statistics(x)
     highpass, bands, lows, spectra = pyramid.forward(x, spectra=True)
     lows[-1] = lows[-1] - lows[-1].mean(axis=(-2, -1), keepdims=True)
     # partially reconstructed low-pass images, coarse to fine
@@ -507,9 +519,9 @@ def ps_statistics(
         partial[s] = pyramid.reconstruct_level(partial[s + 1], bands[s].real, s)
     low_sk = np.stack([np.stack(_moments(p)[2:], axis=-1) for p in partial], axis=1)
     stats = PSStatistics(
-        pixel_moments=np.stack([mean, var, skew, kurt], axis=-1),
-        pixel_range=np.stack([flat.min(axis=1), flat.max(axis=1)], axis=-1),
-        colour_covariance=centred @ centred.T / centred.shape[1],
+        pixel_moments=moments,
+        pixel_range=value_range,
+        colour_covariance=covariance,
         low_skew_kurt=low_sk,
         low_autocorr=[central_autocorrelation(p, lags) for p in partial],
         magnitude_means=np.stack([np.abs(b).mean(axis=(-2, -1)) for b in bands]),
