@@ -93,6 +93,25 @@ def _parse_params(method: str, items: tuple[str, ...]) -> dict:
     return params
 
 
+def _array_or_picture_path(path: str | None) -> Path | None:
+    """Check an extra output that is written as a ``.npy`` array or as a picture (PNG/JPEG/TIFF)."""
+    if path is None:
+        return None
+    if Path(path).suffix.lower() == ".npy":
+        return check_output_path(path, formats={".npy": (8,)})
+    return check_output_path(path)
+
+
+def _write_array_or_picture(path: Path | None, array: np.ndarray, picture) -> None:
+    """Write ``array`` to a ``.npy`` path, or ``picture(array)`` (values in [0, 1]) to an image path."""
+    if path is None:
+        return
+    if path.suffix.lower() == ".npy":
+        write_array(path, array)
+    else:
+        write_image(path, picture(array))
+
+
 def _read_flow(path: str) -> np.ndarray:
     """A flow field from a .npy array (H, W, 2) or from the red/green channels of an image."""
     if Path(path).suffix.lower() == ".npy":
@@ -155,11 +174,7 @@ def synth(exemplar, output, method, size, scale, seed, params, source_map, bit_d
         if not type(synthesizer).has_source_map:
             with_maps = ", ".join(n for n, c in sorted(METHODS.items()) if c.has_source_map)
             raise ValueError(f"method {method!r} does not copy pixels, so it has no source map; methods with one: {with_maps}")
-        suffix = Path(source_map).suffix.lower()
-        if suffix == ".npy":
-            map_path = check_output_path(source_map, formats={".npy": (8,)})
-        else:
-            map_path = check_output_path(source_map)
+        map_path = _array_or_picture_path(source_map)
     flow = None
     if flow_file is not None:
         if not hasattr(synthesizer, "synthesize_along"):
@@ -188,11 +203,7 @@ def synth(exemplar, output, method, size, scale, seed, params, source_map, bit_d
     finally:
         bar.close()
     write_image(out_path, result.image, bit_depth=depth)
-    if map_path is not None:
-        if map_path.suffix.lower() == ".npy":
-            write_array(map_path, result.source_map)
-        else:
-            write_image(map_path, position_colors(result.source_map, image.shape[:2]))
+    _write_array_or_picture(map_path, result.source_map, lambda m: position_colors(m, image.shape[:2]))
     if not quiet:
         h, w = result.image.shape[:2]
         click.echo(f"wrote {out_path} ({w}x{h}, {method}, from {label})", err=True)
@@ -221,18 +232,8 @@ def modify(input_image, exemplar, ratio, output, magnitudes, source_map, no_equa
         raise click.BadParameter(f"--ratio must be in [0, 1], got {ratio}")
     depth = int(bit_depth)
     out_path = check_output_path(output, bit_depth=depth)
-    mag_path = None
-    if magnitudes is not None:
-        if Path(magnitudes).suffix.lower() == ".npy":
-            mag_path = check_output_path(magnitudes, formats={".npy": (8,)})
-        else:
-            mag_path = check_output_path(magnitudes)
-    map_path = None
-    if source_map is not None:
-        if Path(source_map).suffix.lower() == ".npy":
-            map_path = check_output_path(source_map, formats={".npy": (8,)})
-        else:
-            map_path = check_output_path(source_map)
+    mag_path = _array_or_picture_path(magnitudes)
+    map_path = _array_or_picture_path(source_map)
     parameters = _parse_params("patch_wavelet", params)
     method = make_method("patch_wavelet", **parameters)
     texture, _ = _load_exemplar(input_image)
@@ -246,17 +247,9 @@ def modify(input_image, exemplar, ratio, output, magnitudes, source_map, no_equa
     finally:
         bar.close()
     write_image(out_path, result.image, bit_depth=depth)
-    if mag_path is not None:
-        if mag_path.suffix.lower() == ".npy":
-            write_array(mag_path, result.magnitudes)
-        else:
-            top = result.magnitudes.max()
-            write_image(mag_path, np.sqrt(result.magnitudes / top) if top > 0 else result.magnitudes)
-    if map_path is not None:
-        if map_path.suffix.lower() == ".npy":
-            write_array(map_path, result.source_map)
-        else:
-            write_image(map_path, position_colors(result.source_map, image.shape[:2]))
+    top = result.magnitudes.max()
+    _write_array_or_picture(mag_path, result.magnitudes, lambda m: np.sqrt(m / top) if top > 0 else m)
+    _write_array_or_picture(map_path, result.source_map, lambda m: position_colors(m, image.shape[:2]))
     if not quiet:
         h, w = result.image.shape[:2]
         click.echo(f"wrote {out_path} ({w}x{h}, ratio {ratio:g}, exemplar {label})", err=True)
