@@ -18,9 +18,6 @@ Images and GIFs go to ``benchmarks/results/`` (not committed).
 
 from __future__ import annotations
 
-import argparse
-import os
-import platform
 import statistics
 import sys
 import time
@@ -29,20 +26,15 @@ from pathlib import Path
 import numpy as np
 
 import texsyn
+from _common import machine, parser
 from texsyn.io import read_image, write_frames, write_image
 from texsyn.metrics import histogram_distance
+from texsyn.ops import luma
 from texsyn.ops.flow import builtin_flow, structure_tensor_orientation
 from texsyn.ops.pyramids import LaplacianTightFrame
 
-REPO = Path(__file__).resolve().parents[1]
-DEFAULT_TEXTURES = REPO.parent / "shared" / "textures"
 STATIC_FILES = ["gh_tartavel_vistex/Bark-10.png", "gh_tartavel_vistex/Water-05.png", "gh_tartavel_vistex/Brick-02.png"]
 DYNAMIC_FILES = ["gh_tartavel_vistex/Bark-10.png", "gh_tartavel_vistex/Water-05.png"]
-LUMA = np.array([0.299, 0.587, 0.114])
-
-
-def luma(image: np.ndarray) -> np.ndarray:
-    return image @ LUMA if image.ndim == 3 else image
 
 
 def band_profile(image: np.ndarray) -> np.ndarray:
@@ -52,18 +44,13 @@ def band_profile(image: np.ndarray) -> np.ndarray:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--textures", type=Path, default=DEFAULT_TEXTURES)
-    parser.add_argument("--repeats", type=int, default=2)
-    parser.add_argument("--out", type=Path, default=REPO / "benchmarks" / "grouplets.md")
-    parser.add_argument("--images", type=Path, default=REPO / "benchmarks" / "results")
-    args = parser.parse_args(argv)
+    args = parser(__doc__.splitlines()[0], "grouplets.md").parse_args(argv)
     args.images.mkdir(parents=True, exist_ok=True)
     lines = [
         "# Grouplets (Peyré 2008)",
         "",
-        f"Machine: {platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}, "
-        f"numpy {np.__version__}, texsyn {texsyn.__version__}. Default parameters unless stated.",
+        machine() + " "
+        "Default parameters unless stated.",
         "",
     ]
     warm = read_image(args.textures / STATIC_FILES[0])[:32, :32]

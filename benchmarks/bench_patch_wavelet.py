@@ -20,9 +20,6 @@ pixels); the markdown table lists their file names.
 
 from __future__ import annotations
 
-import argparse
-import os
-import platform
 import statistics
 import sys
 import time
@@ -31,11 +28,10 @@ from pathlib import Path
 import numpy as np
 
 import texsyn
+from _common import machine, parser
 from texsyn.io import read_image, write_image
 from texsyn.ops import wrap_seam_ratio
 
-REPO = Path(__file__).resolve().parents[1]
-DEFAULT_TEXTURES = REPO.parent / "shared" / "textures"
 SYNTHESIS_FILES = ["gh_tartavel_vistex/Brick-00.png", "gh_tartavel_vistex/Sand-01.png", "gh_tartavel_vistex/Fabric-13.png"]
 #: (input texture, exemplar) pairs of the modification experiment
 PAIRS = [
@@ -53,18 +49,13 @@ def square(image: np.ndarray, size: int) -> np.ndarray:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--textures", type=Path, default=DEFAULT_TEXTURES)
-    parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--out", type=Path, default=REPO / "benchmarks" / "patch_wavelet.md")
-    parser.add_argument("--images", type=Path, default=REPO / "benchmarks" / "results")
-    args = parser.parse_args(argv)
+    args = parser(__doc__.splitlines()[0], "patch_wavelet.md", repeats=3).parse_args(argv)
     args.images.mkdir(parents=True, exist_ok=True)
     lines = [
         "# Patch-valued wavelet transform (Peyré 2007)",
         "",
-        f"Machine: {platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}, "
-        f"numpy {np.__version__}, texsyn {texsyn.__version__}. Default parameters.",
+        machine() + " "
+        "Default parameters.",
         "",
     ]
 

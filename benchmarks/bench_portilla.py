@@ -13,9 +13,6 @@ covariance of exemplar and output; and MSLG with and without ``post='portilla_si
 
 from __future__ import annotations
 
-import argparse
-import os
-import platform
 import statistics
 import sys
 import time
@@ -24,11 +21,11 @@ from pathlib import Path
 import numpy as np
 
 import texsyn
+from _common import machine, parser
 from texsyn.io import read_image, write_image
 from texsyn.metrics import ps_distance
+from texsyn.ops import luma
 
-REPO = Path(__file__).resolve().parents[1]
-DEFAULT_TEXTURES = REPO.parent / "shared" / "textures"
 FILES = [
     "gh_lcv_textureSynth/text.png",
     "gh_lcv_textureSynth/metal.png",
@@ -36,22 +33,16 @@ FILES = [
     "gh_tartavel_vistex/Flowers-00.png",
     "gh_tartavel_vistex/Sand-01.png",
 ]
-LUMA = np.array([0.299, 0.587, 0.114])
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--textures", type=Path, default=DEFAULT_TEXTURES)
-    parser.add_argument("--repeats", type=int, default=2)
-    parser.add_argument("--out", type=Path, default=REPO / "benchmarks" / "portilla.md")
-    parser.add_argument("--images", type=Path, default=REPO / "benchmarks" / "results")
-    args = parser.parse_args(argv)
+    args = parser(__doc__.splitlines()[0], "portilla.md").parse_args(argv)
     args.images.mkdir(parents=True, exist_ok=True)
     lines = [
         "# Portilla-Simoncelli",
         "",
-        f"Machine: {platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}, "
-        f"numpy {np.__version__}, texsyn {texsyn.__version__}. Defaults: 4 scales, 4 orientations, 7x7 "
+        machine() + " "
+        "Defaults: 4 scales, 4 orientations, 7x7 "
         "auto-correlations, 50 iterations; 128x128 exemplar (top-left crop) to 256x256.",
         "",
         "| exemplar | image | fit + 50 iterations (s) | PS distance: noise | PS distance: output | factor | image |",
@@ -62,7 +53,7 @@ def main(argv: list[str] | None = None) -> int:
     covariances = []
     for name in FILES:
         ex = read_image(args.textures / name)[:128, :128]
-        cases = [("grey", ex if ex.ndim == 2 else (ex @ LUMA).astype(np.float32))]
+        cases = [("grey", ex if ex.ndim == 2 else luma(ex).astype(np.float32))]
         if ex.ndim == 3:
             cases.append(("colour", ex))
         for kind, image in cases:
