@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from .errors import InputError, InputTypeError
 
 __all__ = [
     "Range",
@@ -94,14 +95,14 @@ def as_exemplar(image: Any, *, name: str = "exemplar") -> np.ndarray:
         If its rank, size or values are not allowed (NaN, infinity, outside [0, 1]).
     """
     if isinstance(image, (str, os.PathLike)):
-        raise TypeError(
+        raise InputTypeError(
             f"{name} must be an image array, got a path {str(image)!r}; "
             "read it first with texsyn.io.read_image"
         )
     try:
         arr = np.asarray(image)
     except Exception as exc:  # pragma: no cover - exotic array-likes
-        raise TypeError(f"{name} must be an array of numbers, got {type(image).__name__}") from exc
+        raise InputTypeError(f"{name} must be an array of numbers, got {type(image).__name__}") from exc
     if arr.dtype == bool:
         arr = arr.astype(np.float64)
     if arr.dtype == np.uint8:
@@ -111,11 +112,11 @@ def as_exemplar(image: Any, *, name: str = "exemplar") -> np.ndarray:
     elif np.issubdtype(arr.dtype, np.floating):
         arr = arr.astype(np.float64)
     elif np.issubdtype(arr.dtype, np.integer):
-        raise TypeError(
+        raise InputTypeError(
             f"{name} must be float in [0, 1], uint8 or uint16; got integer dtype {arr.dtype}"
         )
     else:
-        raise TypeError(f"{name} must be an array of numbers, got dtype {arr.dtype}")
+        raise InputTypeError(f"{name} must be an array of numbers, got dtype {arr.dtype}")
     if arr.ndim == 3 and arr.shape[2] in (2, 4):
         if np.any(arr[..., -1] < 1.0):
             warnings.warn(
@@ -128,19 +129,19 @@ def as_exemplar(image: Any, *, name: str = "exemplar") -> np.ndarray:
     if arr.ndim == 3 and arr.shape[2] == 1:
         arr = arr[..., 0]
     if arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[2] != 3):
-        raise ValueError(
+        raise InputError(
             f"{name} must have shape (H, W) or (H, W, 3), got shape {tuple(arr.shape)}"
         )
     if arr.shape[0] < 2 or arr.shape[1] < 2:
-        raise ValueError(
+        raise InputError(
             f"{name} is {arr.shape[1]}x{arr.shape[0]} pixels; at least 2x2 is needed"
         )
     if not np.all(np.isfinite(arr)):
         bad = int(np.count_nonzero(~np.isfinite(arr)))
-        raise ValueError(f"{name} contains {bad} NaN or infinite values; all values must be finite")
+        raise InputError(f"{name} contains {bad} NaN or infinite values; all values must be finite")
     lo, hi = float(arr.min()), float(arr.max())
     if lo < 0.0 or hi > 1.0:
-        raise ValueError(
+        raise InputError(
             f"{name} values must lie in [0, 1], got values in [{lo:.4g}, {hi:.4g}]"
         )
     return np.ascontiguousarray(arr)
@@ -160,7 +161,7 @@ def memory_limit_bytes() -> int:
         try:
             return int(float(number) * scale)
         except ValueError:
-            raise ValueError(
+            raise InputError(
                 f"TEXSYN_MEMORY_LIMIT must be a number of bytes such as 8G, got {env!r}"
             ) from None
     try:
@@ -196,25 +197,25 @@ def check_output_shape(
     try:
         dims = tuple(shape)
     except TypeError:
-        raise TypeError(f"{name} must be a pair (height, width), got {shape!r}") from None
+        raise InputTypeError(f"{name} must be a pair (height, width), got {shape!r}") from None
     if len(dims) == 3:
         dims = dims[:2]
     if len(dims) != 2:
-        raise ValueError(f"{name} must be a pair (height, width), got {shape!r}")
+        raise InputError(f"{name} must be a pair (height, width), got {shape!r}")
     out = []
     for d in dims:
         if isinstance(d, (bool, np.bool_)) or not isinstance(d, (int, np.integer)):
             if isinstance(d, (float, np.floating)) and float(d).is_integer():
                 d = int(d)
             else:
-                raise TypeError(f"{name} must hold integers, got {shape!r}")
+                raise InputTypeError(f"{name} must hold integers, got {shape!r}")
         if d < 1:
-            raise ValueError(f"{name} must hold sizes of at least 1 pixel, got {shape!r}")
+            raise InputError(f"{name} must hold sizes of at least 1 pixel, got {shape!r}")
         out.append(int(d))
     need = float(out[0]) * float(out[1]) * float(bytes_per_pixel)
     limit = memory_limit_bytes()
     if need > limit:
-        raise ValueError(
+        raise InputError(
             f"output of {out[1]}x{out[0]} pixels would need about {_human_bytes(need)} of "
             f"memory, more than the {_human_bytes(limit)} allowed (set TEXSYN_MEMORY_LIMIT "
             "to change it); request a smaller size"
@@ -228,11 +229,11 @@ def normalize_rng(rng: Any) -> np.random.Generator:
         return rng
     if rng is None or isinstance(rng, (int, np.integer, np.random.SeedSequence)):
         if isinstance(rng, (int, np.integer)) and rng < 0:
-            raise ValueError(f"rng seed must be a non-negative integer, got {rng}")
+            raise InputError(f"rng seed must be a non-negative integer, got {rng}")
         return np.random.default_rng(rng)
     if isinstance(rng, np.random.RandomState):
-        raise TypeError(
+        raise InputTypeError(
             "rng must be None, an int or a numpy.random.Generator; the legacy RandomState is "
             "not accepted (texsyn never uses global random state)"
         )
-    raise TypeError(f"rng must be None, an int or a numpy.random.Generator, got {type(rng).__name__}")
+    raise InputTypeError(f"rng must be None, an int or a numpy.random.Generator, got {type(rng).__name__}")

@@ -20,6 +20,7 @@ from . import __version__, data
 from .io import check_output_path, read_image, write_array, write_image
 from .methods import METHODS, Progress, SynthesisResult, get_method, make_method
 from .ops import position_colors
+from .errors import InputError, InputFileNotFoundError, OutputExistsError
 
 EXIT_BAD_INPUT = 2
 
@@ -88,7 +89,7 @@ def _parse_params(method: str, items: tuple[str, ...]) -> dict:
         name = name.strip()
         if name not in specs:
             allowed = ", ".join(specs) if specs else "none"
-            raise ValueError(f"unknown parameter {name!r} for method {method!r}; allowed: {allowed}")
+            raise InputError(f"unknown parameter {name!r} for method {method!r}; allowed: {allowed}")
         params[name] = specs[name].parse(value, method)
     return params
 
@@ -116,17 +117,17 @@ def _read_flow(path: str) -> np.ndarray:
     """A flow field from a .npy array (H, W, 2) or from the red/green channels of an image."""
     if Path(path).suffix.lower() == ".npy":
         if not Path(path).is_file():
-            raise FileNotFoundError(f"no such file: '{path}'")
+            raise InputFileNotFoundError(f"no such file: '{path}'")
         try:
             flow = np.load(path, allow_pickle=False)
         except (ValueError, OSError) as exc:
-            raise ValueError(f"cannot read '{path}' as a NumPy array ({exc})") from None
+            raise InputError(f"cannot read '{path}' as a NumPy array ({exc})") from None
         if flow.ndim != 3 or flow.shape[2] != 2 or not np.issubdtype(flow.dtype, np.number):
-            raise ValueError(f"flow array '{path}' must have shape (H, W, 2), got {flow.shape}")
+            raise InputError(f"flow array '{path}' must have shape (H, W, 2), got {flow.shape}")
         return flow.astype(np.float64)
     picture = read_image(path)
     if picture.ndim != 3:
-        raise ValueError(f"flow image '{path}' must be a colour image (red = row, green = column component)")
+        raise InputError(f"flow image '{path}' must be a colour image (red = row, green = column component)")
     return 2.0 * picture[..., :2].astype(np.float64) - 1.0
 
 
@@ -173,12 +174,12 @@ def synth(exemplar, output, method, size, scale, seed, params, source_map, bit_d
     if source_map is not None:
         if not type(synthesizer).has_source_map:
             with_maps = ", ".join(n for n, c in sorted(METHODS.items()) if c.has_source_map)
-            raise ValueError(f"method {method!r} does not copy pixels, so it has no source map; methods with one: {with_maps}")
+            raise InputError(f"method {method!r} does not copy pixels, so it has no source map; methods with one: {with_maps}")
         map_path = _array_or_picture_path(source_map)
     flow = None
     if flow_file is not None:
         if not hasattr(synthesizer, "synthesize_along"):
-            raise ValueError(f"method {method!r} does not follow a flow; --flow needs method 'grouplets'")
+            raise InputError(f"method {method!r} does not follow a flow; --flow needs method 'grouplets'")
         if size is not None or scale is not None:
             raise click.BadParameter("--flow sets the output size; do not give --size or --scale")
         flow = _read_flow(flow_file)
@@ -280,11 +281,11 @@ def animate(exemplar, output, frames, fps, viscosity, size, seed, loop, params, 
     out_path = Path(output)
     suffix = out_path.suffix.lower()
     if suffix and suffix not in VIDEO_FORMATS:
-        raise ValueError(f"cannot write {suffix!r} animations; use .mp4, .gif or a folder name (PNG frames)")
+        raise InputError(f"cannot write {suffix!r} animations; use .mp4, .gif or a folder name (PNG frames)")
     if not out_path.parent.exists():
-        raise FileNotFoundError(f"no such folder: '{out_path.parent}'")
+        raise InputFileNotFoundError(f"no such folder: '{out_path.parent}'")
     if not suffix and out_path.exists() and (not out_path.is_dir() or any(out_path.iterdir())):
-        raise FileExistsError(f"'{out_path}' exists and is not an empty folder")
+        raise OutputExistsError(f"'{out_path}' exists and is not an empty folder")
     if loop and loop >= frames:
         raise click.BadParameter(f"--loop must be smaller than --frames ({frames}), got {loop}")
     parameters = _parse_params("grouplets", params)
@@ -324,7 +325,7 @@ def compare(exemplar, output, methods, seeds, size, params, overwrite, quiet):
     if not overwrite:
         for p in (html_path, html_path.with_suffix(".json")):
             if p.exists():
-                raise FileExistsError(f"'{p}' already exists; use --overwrite to replace it")
+                raise OutputExistsError(f"'{p}' already exists; use --overwrite to replace it")
     overrides: dict[str, dict] = {}
     for item in params:
         key = item.split("=", 1)[0]
@@ -332,7 +333,7 @@ def compare(exemplar, output, methods, seeds, size, params, overwrite, quiet):
             raise click.BadParameter(f"parameters are given as METHOD.NAME=VALUE, got {item!r}")
         method, rest = item.split(".", 1)
         if method not in names:
-            raise ValueError(f"parameter {item!r} names method {method!r}, which is not compared")
+            raise InputError(f"parameter {item!r} names method {method!r}, which is not compared")
         overrides.setdefault(method, {}).update(_parse_params(method, (rest,)))
     image, label = _load_exemplar(exemplar)
     shape = _parse_size(size) if size is not None else None

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+from .errors import InputError
 
 __all__ = ["BUILTIN", "exemplar"]
 
@@ -25,12 +26,12 @@ def exemplar(name: str = "brick", *, size: int | None = 128) -> np.ndarray:
         The default 128 keeps every method fast.
     """
     if name not in BUILTIN:
-        raise ValueError(f"unknown built-in exemplar {name!r}; choose one of: {', '.join(BUILTIN)}")
+        raise InputError(f"unknown built-in exemplar {name!r}; choose one of: {', '.join(BUILTIN)}")
     from skimage import data as skdata
 
     image = getattr(skdata, BUILTIN[name][0])()
     if size is not None:
         if not 2 <= size <= min(image.shape[:2]):
-            raise ValueError(f"size must be in [2, {min(image.shape[:2])}], got {size}")
+            raise InputError(f"size must be in [2, {min(image.shape[:2])}], got {size}")
         image = image[:size, :size]
     return (image.astype(np.float32) / 255.0)

@@ -14,6 +14,7 @@ from .random_phase import RandomPhase
 from .sparse import ConstrainedSparse
 from .wavelet_sampling import ComplexWaveletSampling
 from .wei_levoy import WeiLevoy
+from ..errors import InputError
 
 METHODS: dict[str, type[TextureSynthesizer]] = {
     cls.name: cls for cls in (Quilting, EfrosLeung, HeegerBergen, RandomPhase, LG, CLG, RCLG, MSLG, ConstrainedSparse, ComplexWaveletSampling, WeiLevoy, PatchWavelet, Grouplets, PortillaSimoncelli)
@@ -49,7 +50,7 @@ __all__ = [
 def get_method(name: str) -> type[TextureSynthesizer]:
     """The method class registered under ``name``; a clear error for unknown names."""
     if not isinstance(name, str) or name not in METHODS:
-        raise ValueError(f"unknown method {name!r}; choose one of: {', '.join(sorted(METHODS))}")
+        raise InputError(f"unknown method {name!r}; choose one of: {', '.join(sorted(METHODS))}")
     return METHODS[name]
 
 
@@ -60,7 +61,7 @@ def make_method(name: str, **params) -> TextureSynthesizer:
     unknown = sorted(set(params) - set(specs))
     if unknown:
         allowed = ", ".join(specs) if specs else "none"
-        raise ValueError(
+        raise InputError(
             f"unknown parameter {unknown[0]!r} for method {name!r}; allowed: {allowed}"
         )
     return cls(**params)

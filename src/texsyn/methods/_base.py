@@ -19,6 +19,7 @@ from typing import Any, Callable, ClassVar
 import numpy as np
 
 from .._validation import OneOf, Range, as_exemplar, check_output_shape, normalize_rng
+from ..errors import InputError, InputTypeError
 
 __all__ = ["ParamSpec", "Progress", "SynthesisResult", "TextureSynthesizer"]
 
@@ -95,48 +96,48 @@ class ParamSpec:
         if value is None:
             if self.optional:
                 return None
-            raise ValueError(f"{where} must be {self.describe_allowed()}, got None")
+            raise InputError(f"{where} must be {self.describe_allowed()}, got None")
         kind = self.type
         if kind is bool:
             if not isinstance(value, (bool, np.bool_)):
-                raise TypeError(f"{where} must be true or false, got {value!r}")
+                raise InputTypeError(f"{where} must be true or false, got {value!r}")
             value = bool(value)
         elif kind is int:
             if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
                 if isinstance(value, (float, np.floating)) and float(value).is_integer():
                     value = int(value)
                 else:
-                    raise TypeError(f"{where} must be an integer, got {value!r}")
+                    raise InputTypeError(f"{where} must be an integer, got {value!r}")
             value = int(value)
         elif kind is float:
             if isinstance(value, (bool, np.bool_)) or not isinstance(
                 value, (int, float, np.integer, np.floating)
             ):
-                raise TypeError(f"{where} must be a number, got {value!r}")
+                raise InputTypeError(f"{where} must be a number, got {value!r}")
             value = float(value)
             if not np.isfinite(value):
-                raise ValueError(f"{where} must be finite, got {value!r}")
+                raise InputError(f"{where} must be finite, got {value!r}")
         elif kind is str:
             if not isinstance(value, str):
-                raise TypeError(f"{where} must be a string, got {value!r}")
+                raise InputTypeError(f"{where} must be a string, got {value!r}")
         elif kind is tuple:
             return self._check_numbers(value, where)
         if self.allowed is not None and not self.allowed.contains(value):
-            raise ValueError(f"{where} must be in {self.allowed.describe()}, got {value!r}")
+            raise InputError(f"{where} must be in {self.allowed.describe()}, got {value!r}")
         return value
 
     def _check_numbers(self, value: Any, where: str) -> tuple[float, ...]:
         """A number or a non-empty sequence of numbers, each finite and allowed."""
         items = [value] if np.ndim(value) == 0 else list(np.ravel(np.asarray(value, dtype=object)))
         if not items:
-            raise ValueError(f"{where} must be {self.describe_allowed()}, got an empty list")
+            raise InputError(f"{where} must be {self.describe_allowed()}, got an empty list")
         out = []
         for item in items:
             if isinstance(item, (bool, np.bool_)) or not isinstance(item, (int, float, np.integer, np.floating)):
-                raise TypeError(f"{where} must be {self.describe_allowed()}, got {value!r}")
+                raise InputTypeError(f"{where} must be {self.describe_allowed()}, got {value!r}")
             x = float(item)
             if not np.isfinite(x) or (self.allowed is not None and not self.allowed.contains(x)):
-                raise ValueError(f"{where} must be {self.describe_allowed()}, got {value!r}")
+                raise InputError(f"{where} must be {self.describe_allowed()}, got {value!r}")
             out.append(x)
         return tuple(out)
 
@@ -163,7 +164,7 @@ class ParamSpec:
             else:
                 value = text
         except ValueError:
-            raise ValueError(
+            raise InputError(
                 f"{where} must be {self.describe_allowed()}, got {text!r}"
             ) from None
         return self.check(value, method)
@@ -279,7 +280,7 @@ class TextureSynthesizer:
         ex = as_exemplar(exemplar)
         side, why = self.min_exemplar_size()
         if min(ex.shape[:2]) < side:
-            raise ValueError(
+            raise InputError(
                 f"exemplar of {ex.shape[1]}x{ex.shape[0]} pixels is too small for method "
                 f"{self.name!r}: {why}"
             )

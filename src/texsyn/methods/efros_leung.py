@@ -9,6 +9,7 @@ import numpy as np
 from .._validation import Range
 from ..ops.nonparametric import NonParametricSampler
 from ._base import Progress, TextureSynthesizer
+from ..errors import InputError
 
 __all__ = ["EfrosLeung"]
 
@@ -67,7 +68,7 @@ class EfrosLeung(TextureSynthesizer):
     def _check_params(self) -> None:
         super()._check_params()
         if self.window_size % 2 == 0:
-            raise ValueError(
+            raise InputError(
                 f"parameter 'window_size' of method 'efros_leung' must be odd, got {self.window_size}"
             )
 

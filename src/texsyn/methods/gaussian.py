@@ -41,6 +41,7 @@ from ..ops import (
 from ..ops.gaussian import local_gaussian
 from ..ops.portilla import max_scales
 from ._base import Progress, TextureSynthesizer
+from ..errors import InputError
 
 __all__ = ["LG", "CLG", "RCLG", "MSLG", "gaussian_resample", "raster_positions"]
 
@@ -467,7 +468,7 @@ class MSLG(TextureSynthesizer):
     def _check_params(self) -> None:
         super()._check_params()
         if self.patch_size % 2:
-            raise ValueError(
+            raise InputError(
                 f"parameter 'patch_size' of method 'mslg' must be even (the step is n/2), got {self.patch_size}"
             )
 
@@ -600,11 +601,11 @@ def gaussian_resample(
     """
     img = as_exemplar(image, name="image")
     if not 2 <= patch_size <= min(img.shape[:2]):
-        raise ValueError(f"patch_size must be in [2, {min(img.shape[:2])}], got {patch_size}")
+        raise InputError(f"patch_size must be in [2, {min(img.shape[:2])}], got {patch_size}")
     if not 0 < overlap < 1:
-        raise ValueError(f"overlap must be in (0, 1), got {overlap}")
+        raise InputError(f"overlap must be in (0, 1), got {overlap}")
     if n_neighbors < 2:
-        raise ValueError(f"n_neighbors must be at least 2, got {n_neighbors}")
+        raise InputError(f"n_neighbors must be at least 2, got {n_neighbors}")
     gen = normalize_rng(rng)
     u = as_channels(img)
     source = _PatchSource(u, u, patch_size)

@@ -28,6 +28,7 @@ from ..ops.flow import association_fields, builtin_flow, orient_field, structure
 from ..ops.fluid import advect, diffuse, project, rescale_speed
 from ..ops.grouplets import WaveletGroupletTransform
 from ._base import Progress, TextureSynthesizer
+from ..errors import InputError
 
 __all__ = ["Frame", "Grouplets", "GroupletModel"]
 
@@ -279,7 +280,7 @@ class Grouplets(TextureSynthesizer):
         self._require_fitted()
         flow = np.asarray(flow, dtype=np.float64)
         if flow.ndim != 3 or flow.shape[2] != 2:
-            raise ValueError(f"flow must have shape (H, W, 2), got {flow.shape}")
+            raise InputError(f"flow must have shape (H, W, 2), got {flow.shape}")
         check_output_shape(flow.shape[:2], bytes_per_pixel=self.bytes_per_pixel * self.model_.channels)
         return self._as_output(self._along(flow, normalize_rng(rng), callback))
 
@@ -340,7 +341,7 @@ class Grouplets(TextureSynthesizer):
             return
         ex = self._require_fitted()
         if int(n_frames) < 1:
-            raise ValueError(f"n_frames must be at least 1, got {n_frames}")
+            raise InputError(f"n_frames must be at least 1, got {n_frames}")
         shape = tuple(ex.shape[:2]) if shape is None else check_output_shape(shape, bytes_per_pixel=self.bytes_per_pixel * self.model_.channels)
         generator = normalize_rng(rng)
         model: GroupletModel = self.model_
@@ -365,7 +366,7 @@ class Grouplets(TextureSynthesizer):
 
     def _looped(self, n_frames, shape, *, rng, callback, overlap):
         if not 0 < overlap < int(n_frames):
-            raise ValueError(f"loop must be between 1 and n_frames - 1 = {int(n_frames) - 1}, got {overlap}")
+            raise InputError(f"loop must be between 1 and n_frames - 1 = {int(n_frames) - 1}, got {overlap}")
         total = int(n_frames) + overlap
 
         def report(progress):

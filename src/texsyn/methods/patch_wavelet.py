@@ -25,6 +25,7 @@ from .._validation import OneOf, Range, as_exemplar, memory_limit_bytes
 from ..ops import as_channels, luma, match_histogram
 from ..ops.patch_wavelet import PatchWaveletCoefficients, PatchWaveletTransform
 from ._base import Progress, TextureSynthesizer
+from ..errors import InputError, MemoryLimitError
 
 __all__ = ["Modification", "PatchWavelet"]
 
@@ -161,7 +162,7 @@ class PatchWavelet(TextureSynthesizer):
         need = sum(4.0 * h * w * transform.windows.dimension(width) for width in transform.widths())
         limit = memory_limit_bytes()
         if need > limit:
-            raise MemoryError(
+            raise MemoryLimitError(
                 f"exemplar of {w}x{h} pixels needs about {need / 2**30:.1f} GiB of patch indexes for "
                 f"method 'patch_wavelet', more than the {limit / 2**30:.1f} GiB allowed; use a smaller "
                 "exemplar, a smaller max_resolution, or set TEXSYN_MEMORY_LIMIT"
@@ -247,9 +248,9 @@ class PatchWavelet(TextureSynthesizer):
         ratios = [ratio] if np.ndim(ratio) == 0 else list(ratio)
         for r in ratios:
             if isinstance(r, (bool, np.bool_)) or not isinstance(r, (int, float, np.integer, np.floating)) or not 0.0 <= float(r) <= 1.0:
-                raise ValueError(f"ratio must be a number in [0, 1], got {r!r}")
+                raise InputError(f"ratio must be a number in [0, 1], got {r!r}")
         if grid_boundary not in ("symmetric", "periodic"):
-            raise ValueError(f"grid_boundary must be 'symmetric' or 'periodic', got {grid_boundary!r}")
+            raise InputError(f"grid_boundary must be 'symmetric' or 'periodic', got {grid_boundary!r}")
         tex = as_channels(np.asarray(as_exemplar(texture, name="texture"), dtype=np.float64))
         ex = as_channels(exemplar)
         if tex.shape[2] != ex.shape[2]:

@@ -9,6 +9,7 @@ import numpy as np
 from .._validation import Range
 from ..ops import FFTPatchSearch, as_channels, boundary_cut_mask, overlap_error
 from ._base import Progress, TextureSynthesizer
+from ..errors import InputError
 
 __all__ = ["Quilting"]
 
@@ -69,7 +70,7 @@ class Quilting(TextureSynthesizer):
     def _check_params(self) -> None:
         super()._check_params()
         if self._overlap() >= self.patch_size:
-            raise ValueError(
+            raise InputError(
                 f"parameter 'overlap' of method 'quilting' must be smaller than patch_size="
                 f"{self.patch_size}, got {self.overlap}"
             )

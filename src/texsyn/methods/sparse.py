@@ -37,6 +37,7 @@ from ..ops import (
 from ..ops.graphcut import graphcut_reassemble
 from ..ops.sparse import constrained_matching_pursuit, ksvd
 from ._base import Progress, TextureSynthesizer
+from ..errors import InputError
 
 __all__ = ["ConstrainedSparse", "MODES", "upsample_bicubic"]
 
@@ -254,16 +255,16 @@ class ConstrainedSparse(TextureSynthesizer):
         super()._check_params()
         tau, step = self.patch_size, self.step
         if step > tau or tau % step:
-            raise ValueError(
+            raise InputError(
                 f"parameter 'step' of method 'sparse' must divide patch_size={tau}, got {step}"
             )
         if self._graphcut and 2 * step < tau:
-            raise ValueError(
+            raise InputError(
                 f"parameter 'step' of method 'sparse' must be at least patch_size/2={tau / 2:g} "
                 f"in mode {self.mode!r} (graph cuts need single overlaps), got {step}"
             )
         if self.n_atoms < self.sparsity + 1:
-            raise ValueError(
+            raise InputError(
                 f"parameter 'n_atoms' of method 'sparse' must exceed sparsity={self.sparsity}, got {self.n_atoms}"
             )
 
@@ -285,7 +286,7 @@ class ConstrainedSparse(TextureSynthesizer):
             patches, _ = extract_patches(image, tau)
             n_patches = patches.shape[0]
             if n_patches < 2 * (s + 1):
-                raise ValueError(
+                raise InputError(
                     f"exemplar {ex.shape[1]}x{ex.shape[0]} gives {n_patches} patches of side "
                     f"patch_size={tau} at scale {j} (n_scales={self._scales}); need at least "
                     f"{2 * (s + 1)}: use fewer scales, smaller patches or a larger exemplar"
@@ -431,23 +432,23 @@ class ConstrainedSparse(TextureSynthesizer):
         """Rebuild a fitted instance; ``params`` may change sampling parameters only."""
         version = int(np.asarray(state["format_version"]))
         if version != FORMAT_VERSION:
-            raise ValueError(f"fitted state has format_version {version}; this texsyn reads {FORMAT_VERSION}")
+            raise InputError(f"fitted state has format_version {version}; this texsyn reads {FORMAT_VERSION}")
         if str(np.asarray(state["method"])) != cls.name:
-            raise ValueError(f"fitted state is for method {str(np.asarray(state['method']))!r}, not {cls.name!r}")
+            raise InputError(f"fitted state is for method {str(np.asarray(state['method']))!r}, not {cls.name!r}")
         saved = json.loads(str(np.asarray(state["params"])))
         changed = sorted(k for k in params if k in LEARNED and params[k] != saved.get(k))
         if changed:
-            raise ValueError(
+            raise InputError(
                 f"cannot change {', '.join(changed)} of a loaded dictionary (they change what fit learned)"
             )
         unknown = sorted(set(params) - set(cls.param_specs()))
         if unknown:
-            raise ValueError(f"unknown parameter {unknown[0]!r} for method {cls.name!r}")
+            raise InputError(f"unknown parameter {unknown[0]!r} for method {cls.name!r}")
         method = cls(**{**saved, **params})
         method._check_params()
         fitted = int(np.asarray(state["n_scales_fitted"]))
         if method._scales > fitted:
-            raise ValueError(
+            raise InputError(
                 f"mode {method.mode!r} needs {method._scales} scales but the saved state has {fitted}; "
                 "save a model fitted in mode 'multiscale' or 'full'"
             )

@@ -23,6 +23,7 @@ from ..ops import as_channels, crop_to_multiple, rgb_to_yuv, yuv_to_rgb
 from ..ops.dtcwt import DTCWT, DTCWTPyramid
 from ..ops.nonparametric import NonParametricSampler
 from ._base import Progress, TextureSynthesizer
+from ..errors import InputError
 
 __all__ = ["ComplexWaveletSampling", "propagate", "block_indices"]
 
@@ -128,7 +129,7 @@ class ComplexWaveletSampling(TextureSynthesizer):
     def _check_params(self) -> None:
         super()._check_params()
         if self.window % 2 == 0:
-            raise ValueError(f"parameter 'window' of method 'cwt' must be odd, got {self.window}")
+            raise InputError(f"parameter 'window' of method 'cwt' must be odd, got {self.window}")
 
     def min_exemplar_size(self):
         cells = self.window if self.candidates == "valid" else 3

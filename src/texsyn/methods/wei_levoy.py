@@ -31,6 +31,7 @@ import numpy as np
 from .._validation import OneOf, Range
 from ..ops import as_channels, gaussian_pyramid
 from ._base import Progress, TextureSynthesizer
+from ..errors import InputError
 
 __all__ = ["WeiLevoy", "causal_offsets", "TSVQ"]
 
@@ -162,7 +163,7 @@ class WeiLevoy(TextureSynthesizer):
         super()._check_params()
         for name in ("window", "parent_window"):
             if getattr(self, name) % 2 == 0:
-                raise ValueError(f"parameter {name!r} of method 'wei_levoy' must be odd, got {getattr(self, name)}")
+                raise InputError(f"parameter {name!r} of method 'wei_levoy' must be odd, got {getattr(self, name)}")
 
     def min_exemplar_size(self):
         side = max(2 ** (self.levels - 1) * 2, self.window // 2 + 1)

@@ -24,6 +24,7 @@ import numpy as np
 from .. import __version__
 from ..methods import METHODS, Progress, make_method
 from ..metrics import METRIC_DESCRIPTIONS, evaluate, nearest_patch_field, synthesis_map
+from ..errors import InputError, OutputExistsError
 
 __all__ = ["MethodRun", "MethodRecord", "Report", "run_comparison", "write_report"]
 
@@ -227,7 +228,7 @@ def run_comparison(
     ex = as_exemplar(exemplar)
     names = list(methods) if methods else sorted(METHODS)
     if seeds < 1:
-        raise ValueError(f"seeds must be at least 1, got {seeds}")
+        raise InputError(f"seeds must be at least 1, got {seeds}")
     shape = (2 * ex.shape[0], 2 * ex.shape[1]) if shape is None else tuple(shape)
     params = params or {}
     grid = np.stack(np.mgrid[: ex.shape[0], : ex.shape[1]], axis=-1)
@@ -305,7 +306,7 @@ def write_report(report: Report, path: str | Path, *, overwrite: bool = False) -
     if not overwrite:
         for p in (html_path, json_path):
             if p.exists():
-                raise FileExistsError(f"'{p}' already exists; use --overwrite to replace it")
+                raise OutputExistsError(f"'{p}' already exists; use --overwrite to replace it")
     page = report.to_html()
     data = json.dumps(report.to_dict(), indent=2)
 
