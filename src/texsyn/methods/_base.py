@@ -20,6 +20,7 @@ import numpy as np
 
 from .._validation import OneOf, Range, as_exemplar, check_output_shape, normalize_rng
 from ..errors import InputError, InputTypeError
+from ..ops.linalg import fixed_order
 
 __all__ = ["ParamSpec", "Progress", "SynthesisResult", "TextureSynthesizer"]
 
@@ -264,6 +265,7 @@ class TextureSynthesizer:
         """Smallest exemplar side this configuration accepts, and why."""
         return 2, "at least 2x2 pixels"
 
+    @fixed_order
     def fit(self, exemplar: np.ndarray) -> "TextureSynthesizer":
         """Validate the exemplar and learn everything that depends only on it.
 
@@ -321,6 +323,7 @@ class TextureSynthesizer:
         """
         return self.sample_with_map(shape, rng=rng, callback=callback).image
 
+    @fixed_order
     def sample_with_map(
         self,
         shape: tuple[int, int] | None = None,

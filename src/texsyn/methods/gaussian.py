@@ -42,6 +42,7 @@ from ..ops.gaussian import local_gaussian
 from ..ops.portilla import max_scales
 from ._base import Progress, TextureSynthesizer
 from ..errors import InputError
+from ..ops.linalg import fixed_order
 
 __all__ = ["LG", "CLG", "RCLG", "MSLG", "gaussian_resample", "raster_positions"]
 
@@ -573,6 +574,7 @@ class MSLG(TextureSynthesizer):
         return out
 
 
+@fixed_order
 def gaussian_resample(
     image: np.ndarray,
     patch_size: int = 20,

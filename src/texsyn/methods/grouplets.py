@@ -29,6 +29,7 @@ from ..ops.fluid import advect, diffuse, project, rescale_speed
 from ..ops.grouplets import WaveletGroupletTransform
 from ._base import Progress, TextureSynthesizer
 from ..errors import InputError
+from ..ops.linalg import fixed_order
 
 __all__ = ["Frame", "Grouplets", "GroupletModel"]
 
@@ -263,6 +264,7 @@ class Grouplets(TextureSynthesizer):
     def _sample(self, shape, rng, callback):
         return self._along(self.flow_field(shape), rng, callback), None
 
+    @fixed_order
     def synthesize_along(
         self,
         flow: np.ndarray,
@@ -304,6 +306,7 @@ class Grouplets(TextureSynthesizer):
             raw = np.stack([gaussian_filter(rng.standard_normal(shape), width, mode="wrap") for _ in range(2)], axis=-1)
         return rescale_speed(project(raw), self.speed)
 
+    @fixed_order
     def animate(
         self,
         n_frames: int = 60,

@@ -26,6 +26,7 @@ from ..ops import as_channels, luma, match_histogram
 from ..ops.patch_wavelet import PatchWaveletCoefficients, PatchWaveletTransform
 from ._base import Progress, TextureSynthesizer
 from ..errors import InputError, MemoryLimitError
+from ..ops.linalg import fixed_order
 
 __all__ = ["Modification", "PatchWavelet"]
 
@@ -204,6 +205,7 @@ class PatchWavelet(TextureSynthesizer):
         return transform.image(coords), coords
 
     # ------------------------------------------------------------------ modification
+    @fixed_order
     def modify(
         self,
         texture: np.ndarray,

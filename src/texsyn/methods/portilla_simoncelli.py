@@ -23,6 +23,7 @@ from .._validation import OneOf, Range, as_exemplar
 from ..ops import ColorPCA, as_channels, luma, periodic_smooth_decomposition
 from ..ops.portilla import ComplexSteerablePyramid, PSStatistics, pixel_statistics, ps_statistics, ps_synthesis
 from ._base import Progress, TextureSynthesizer
+from ..ops.linalg import fixed_order
 
 __all__ = ["PortillaSimoncelli"]
 
@@ -122,6 +123,7 @@ class PortillaSimoncelli(TextureSynthesizer):
         out = self._run(initial, self.n_iterations, callback)
         return self._to_image(out)[: shape[0], : shape[1]], None
 
+    @fixed_order
     def refine(
         self,
         image: np.ndarray,

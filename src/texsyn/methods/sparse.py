@@ -38,6 +38,7 @@ from ..ops.graphcut import graphcut_reassemble
 from ..ops.sparse import constrained_matching_pursuit, ksvd
 from ._base import Progress, TextureSynthesizer
 from ..errors import InputError
+from ..ops.linalg import matmul
 
 __all__ = ["ConstrainedSparse", "MODES", "upsample_bicubic"]
 
@@ -360,7 +361,7 @@ class ConstrainedSparse(TextureSynthesizer):
                 clock = time.perf_counter()
                 patches, anchors = extract_patches(shifted, tau, stride=step, mode="periodic")
                 codes = constrained_matching_pursuit(patches.T, dictionary, s, budget, gram=gram)
-                coded = (dictionary @ codes).T
+                coded = matmul(dictionary, codes).T
                 seconds["coding"] += time.perf_counter() - clock
                 clock = time.perf_counter()
                 if self._graphcut:

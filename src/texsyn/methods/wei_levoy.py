@@ -32,6 +32,7 @@ from .._validation import OneOf, Range
 from ..ops import as_channels, gaussian_pyramid
 from ._base import Progress, TextureSynthesizer
 from ..errors import InputError
+from ..ops.linalg import matmul
 
 __all__ = ["WeiLevoy", "causal_offsets", "TSVQ"]
 
@@ -216,7 +217,7 @@ class WeiLevoy(TextureSynthesizer):
                 if tree is not None:
                     best = np.array([tree.query(v) for v in q])
                 else:
-                    best = np.argmin(norms[None, :] - 2.0 * (q @ bank.T), axis=1)
+                    best = np.argmin(norms[None, :] - 2.0 * matmul(q, bank.T), axis=1)
                 out[ys, xs] = flat_ex[best]
                 src[ys, xs] = best
                 done += len(ys)

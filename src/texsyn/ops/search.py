@@ -18,6 +18,7 @@ import numba
 import numpy as np
 
 from .patches import as_channels
+from .linalg import matmul
 
 __all__ = [
     "knn_select",
@@ -177,7 +178,7 @@ class WeightedPatchBank:
         w = np.asarray(weights, dtype=np.float64)
         q = np.asarray(queries, dtype=np.float64)
         wq = w * q
-        d = np.concatenate([w, wq], axis=1) @ self._stacked.T
+        d = matmul(np.concatenate([w, wq], axis=1), self._stacked.T)
         d += np.sum(wq * q, axis=1)[:, None]
         return np.maximum(d, 0.0, out=d)
 
@@ -201,7 +202,7 @@ def knn_patches(
     dist = np.empty((queries.shape[0], k))
     for start in range(0, queries.shape[0], block):
         q = queries[start : start + block]
-        d = bank_norm[None, :] - 2.0 * (q @ bank.T) + np.sum(q * q, axis=1)[:, None]
+        d = bank_norm[None, :] - 2.0 * matmul(q, bank.T) + np.sum(q * q, axis=1)[:, None]
         np.maximum(d, 0.0, out=d)
         order = np.argsort(d, axis=1, kind="stable")[:, :k]
         idx[start : start + len(q)] = order
@@ -263,7 +264,7 @@ def nearest_both_ways(
     b_dist = np.full(bank.shape[0], np.inf)
     for start in range(0, queries.shape[0], block):
         q = queries[start : start + block]
-        _fold_minima(q @ bank.T, query_norm[start : start + block], bank_norm, start, q_idx, q_dist, b_idx, b_dist)
+        _fold_minima(matmul(q, bank.T), query_norm[start : start + block], bank_norm, start, q_idx, q_dist, b_idx, b_dist)
     return q_idx, q_dist, b_idx, b_dist
 
 
@@ -354,7 +355,7 @@ class NearestPatchIndex:
         for start in range(0, n, self.block):
             q = queries[start : start + self.block]
             m = q.shape[0]
-            gram = (q - self.mean).astype(np.float32) @ self._bank32.T
+            gram = matmul((q - self.mean).astype(np.float32), self._bank32.T)
             _best_columns(gram, self._half_norm, self.candidates, cand[:m])
             c = cand[:m]
             diff = self._rows(c.ravel()).reshape(m, self.candidates, dim) - q[:, None, :]

@@ -11,6 +11,7 @@ import heapq
 
 import numpy as np
 from scipy.sparse import csr_matrix
+from .linalg import matmul
 
 __all__ = ["batch_omp", "ksvd", "constrained_matching_pursuit"]
 
@@ -53,7 +54,7 @@ def batch_omp(
     x = np.asarray(signals, dtype=np.float64)
     g = d.T @ d if gram is None else gram
     n_atoms, n_signals = d.shape[1], x.shape[1]
-    xtd = x.T @ d  # (K, N): rows are contiguous for the per-signal argmax
+    xtd = matmul(x.T, d)  # (K, N): rows are contiguous for the per-signal argmax
     corr = xtd.copy()
     codes = np.zeros((n_signals, n_atoms))
     support = np.zeros((n_signals, 0), dtype=np.int64)
@@ -190,7 +191,7 @@ def constrained_matching_pursuit(
     """
     d = np.asarray(dictionary, dtype=np.float64)
     g = d.T @ d if gram is None else gram
-    corr = d.T @ np.asarray(patches, dtype=np.float64)  # (N, K): <r_k, d_n>
+    corr = matmul(d.T, np.asarray(patches, dtype=np.float64))  # (N, K): <r_k, d_n>
     n_atoms, n_patches = corr.shape
     limit = np.full(n_atoms, np.iinfo(np.int64).max) if budget is None else np.asarray(budget, dtype=np.int64)
     w = np.zeros((n_atoms, n_patches))

@@ -25,6 +25,7 @@ from .. import __version__
 from ..methods import METHODS, Progress, make_method
 from ..metrics import METRIC_DESCRIPTIONS, evaluate, nearest_patch_field, synthesis_map
 from ..errors import InputError, OutputExistsError
+from ..ops.linalg import fixed_order
 
 __all__ = ["MethodRun", "MethodRecord", "Report", "run_comparison", "write_report"]
 
@@ -195,6 +196,7 @@ def _versions() -> dict[str, str]:
     }
 
 
+@fixed_order
 def run_comparison(
     exemplar: np.ndarray,
     methods: Sequence[str] | None = None,

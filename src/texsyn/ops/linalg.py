@@ -1,0 +1,189 @@
+"""Matrix products whose rounding does not depend on the number of threads.
+
+OpenBLAS splits a product differently with one thread than with several (its single-thread
+path blocks the inner dimension differently, and ``dot``/``gemv`` add per-thread partial
+sums), so ``A @ B`` can differ in the last bits between ``OPENBLAS_NUM_THREADS=1`` and the
+default, and which kernels do so depends on the processor. A texture synthesis amplifies
+such bits (a nearest-patch choice flips, an iteration diverges), so the same seed would not
+give the same bytes. texsyn therefore fixes the order of every reduction itself
+(``docs/determinism.md``):
+
+- while texsyn computes (:func:`fixed_order`, entered by every public method and
+  function), the BLAS libraries run one thread, so each BLAS or LAPACK call has the
+  single-thread reduction order whatever the machine's thread settings;
+- the large products that dominate the run time (patch searches, sparse coding) go
+  through :func:`matmul`, which splits the rows of the left operand into blocks of a fixed
+  size and multiplies the blocks concurrently on a thread pool. Each block is an ordinary
+  single-thread BLAS call, so its bytes depend on the block size only, never on the number
+  of workers: all cores are used and the result is the same with 1, 2 or 64 of them.
+
+Numba ``prange`` loops in texsyn write independent outputs (no cross-iteration sums), and the
+FFTs (NumPy's pocketfft) are single-threaded, so neither depends on the thread count.
+"""
+
+from __future__ import annotations
+
+import functools
+import inspect
+import os
+import threading
+from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
+from typing import Callable, Iterator, TypeVar
+
+import numpy as np
+
+__all__ = ["fixed_order", "matmul", "worker_count", "BLOCK_ROWS"]
+
+#: rows of the left operand in one block of :func:`matmul` (part of the rounding contract:
+#: changing it may change results in the last bits)
+BLOCK_ROWS = 256
+#: products smaller than this many multiply-adds are computed in one call
+_PARALLEL_MIN_WORK = 1 << 22
+
+_lock = threading.Lock()
+_depth = 0
+_saved: list = []
+_pool: ThreadPoolExecutor | None = None
+_pool_lock = threading.Lock()
+
+F = TypeVar("F", bound=Callable)
+
+
+def _enter() -> None:
+    """First entrant: set every loaded BLAS library (NumPy's, SciPy's...) to one thread."""
+    global _depth
+    with _lock:
+        if _depth == 0:
+            from threadpoolctl import ThreadpoolController
+
+            # made anew each time: libraries loaded since the last call are included
+            for lib in ThreadpoolController().lib_controllers:
+                if lib.user_api == "blas":
+                    _saved.append((lib, lib.num_threads))
+                    lib.set_num_threads(1)
+        _depth += 1
+
+
+def _exit() -> None:
+    """Last leaver: give every BLAS library back the thread count it had."""
+    global _depth
+    with _lock:
+        _depth -= 1
+        if _depth == 0:
+            while _saved:
+                lib, threads = _saved.pop()
+                lib.set_num_threads(threads)
+
+
+@contextmanager
+def _fixed_order_context() -> Iterator[None]:
+    _enter()
+    try:
+        yield
+    finally:
+        _exit()
+
+
+def fixed_order(func: F | None = None):
+    """Run ``func`` (or a ``with`` block) with every BLAS call in its single-thread order.
+
+    Use as a decorator of public entry points, or as ``with fixed_order():``. Re-entrant
+    and thread-safe: the BLAS thread count is set to one when the first caller enters and
+    restored when the last one leaves. A decorated generator function holds the setting
+    only while it computes, not while its consumer runs between frames.
+
+    Parameters
+    ----------
+    func : callable, optional
+        Function or generator function to wrap.
+    """
+    if func is None:
+        return _fixed_order_context()
+    if inspect.isgeneratorfunction(func):
+
+        @functools.wraps(func)
+        def generator_wrapper(*args, **kwargs):
+            with _fixed_order_context():
+                gen = func(*args, **kwargs)
+            try:
+                while True:
+                    with _fixed_order_context():
+                        item = next(gen)
+                    yield item
+            except StopIteration:
+                return
+            finally:
+                with _fixed_order_context():
+                    gen.close()
+
+        return generator_wrapper  # type: ignore[return-value]
+
+    @functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        with _fixed_order_context():
+            return func(*args, **kwargs)
+
+    return wrapper  # type: ignore[return-value]
+
+
+def worker_count() -> int:
+    """Threads texsyn's own parallel loops may use: the CPUs this process may run on."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):  # pragma: no cover - non-Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def _thread_pool() -> ThreadPoolExecutor:
+    global _pool
+    with _pool_lock:
+        if _pool is None:
+            _pool = ThreadPoolExecutor(max_workers=worker_count(), thread_name_prefix="texsyn-matmul")
+        return _pool
+
+
+def matmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a @ b`` for a 2-D ``a``, with rounding independent of the number of threads.
+
+    The rows of ``a`` are cut into blocks of :data:`BLOCK_ROWS`; each block is one
+    single-thread BLAS product, and the blocks run concurrently on a thread pool (BLAS
+    releases the GIL). The bytes of the result depend on the block size only.
+
+    Parameters
+    ----------
+    a : ndarray, shape (m, k)
+    b : ndarray, shape (k, n) or (k,)
+
+    Returns
+    -------
+    ndarray, shape (m, n) or (m,)
+    """
+    a = np.asarray(a)
+    b = np.asarray(b)
+    if a.ndim != 2:
+        raise ValueError(f"matmul needs a 2-D left operand, got shape {a.shape}")
+    m, k = a.shape
+    n = 1 if b.ndim == 1 else b.shape[1]
+    with _fixed_order_context():
+        if m <= BLOCK_ROWS or m * k * n < _PARALLEL_MIN_WORK or worker_count() == 1:
+            return _blocked(a, b)
+        out = np.empty((m,) + b.shape[1:], dtype=np.result_type(a, b))
+        starts = range(0, m, BLOCK_ROWS)
+
+        def block(start: int) -> None:
+            np.matmul(a[start : start + BLOCK_ROWS], b, out=out[start : start + BLOCK_ROWS])
+
+        list(_thread_pool().map(block, starts))
+        return out
+
+
+def _blocked(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The same blocks as the parallel path, computed one after the other."""
+    m = a.shape[0]
+    if m <= BLOCK_ROWS:
+        return a @ b
+    out = np.empty((m,) + b.shape[1:], dtype=np.result_type(a, b))
+    for start in range(0, m, BLOCK_ROWS):
+        np.matmul(a[start : start + BLOCK_ROWS], b, out=out[start : start + BLOCK_ROWS])
+    return out
