@@ -2,10 +2,44 @@
 
 from __future__ import annotations
 
+import os
+import sys
+
 import numpy as np
 import pytest
 
 import texsyn
+
+sys.path.insert(0, os.path.dirname(__file__))
+import sabotage  # noqa: E402  (tests/sabotage.py: deliberate breakage for the sabotage harness)
+
+
+def pytest_addoption(parser):
+    parser.addoption(
+        "--method-tests",
+        metavar="NAME",
+        help="run only the tests marked @pytest.mark.method(NAME) (used by the sabotage harness)",
+    )
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "method(name, ...): tests of what makes method NAME that method")
+    config.addinivalue_line("markers", "slow: long meta-tests (sabotage harness), not in the default run")
+    installed = sabotage.install()
+    if installed:
+        sys.stderr.write(f"texsyn tests: {installed}\n")
+
+
+def pytest_collection_modifyitems(config, items):
+    name = config.getoption("--method-tests")
+    if not name:
+        return
+    keep, drop = [], []
+    for item in items:
+        names = {arg for mark in item.iter_markers("method") for arg in mark.args}
+        (keep if name in names else drop).append(item)
+    config.hook.pytest_deselected(items=drop)
+    items[:] = keep
 
 
 @pytest.fixture(scope="session")
