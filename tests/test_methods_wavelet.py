@@ -22,6 +22,7 @@ def test_coefficient_tree_maps_a_cell_to_its_child_blocks():
     np.testing.assert_array_equal(level1[:4, 4:, 1], np.repeat(np.arange(8, 12)[None, :], 4, axis=0))
 
 
+@pytest.mark.method("cwt")
 def test_same_size_output_with_the_exemplar_seed_is_the_exemplar():
     ex = texsyn.data.exemplar("gravel", size=64)
     out = texsyn.synthesize(ex, "cwt", ex.shape, rng=0)
@@ -47,6 +48,7 @@ def test_every_level_copies_the_blocks_named_by_the_source_cells():
     assert cells.min() >= 0
 
 
+@pytest.mark.method("cwt")
 def test_colour_u_and_v_follow_the_luminance_source_map():
     layers = [texsyn.data.exemplar(n, size=64) for n in ("grass", "gravel", "brick")]
     ex = 0.35 + 0.3 * np.stack(layers, axis=-1)  # low contrast: no clipping
@@ -61,6 +63,7 @@ def test_colour_u_and_v_follow_the_luminance_source_map():
         np.testing.assert_allclose(yuv[..., c], expected, atol=1e-5)
 
 
+@pytest.mark.method("cwt")
 def test_a_periodic_coarse_structure_keeps_its_period():
     yy, xx = np.mgrid[:64, :64]
     ex = 0.5 + 0.3 * np.sin(2 * np.pi * xx / 16) + 0.1 * np.sin(2 * np.pi * yy / 32)
@@ -85,6 +88,7 @@ def mean_region_area_outside(source_map, inside):
     return float(np.mean(areas[labels[~inside]]))
 
 
+@pytest.mark.method("cwt")
 def test_level_3_reproduces_words_where_pixel_sampling_grows_fragments():
     from texsyn.ops.nonparametric import NonParametricSampler
 
@@ -114,8 +118,14 @@ def test_wei_levoy_tsvq_with_one_leaf_is_the_exact_search():
     exact = texsyn.make_method("wei_levoy", levels=2, window=5).fit(ex).sample((24, 24), rng=0)
     tree = texsyn.make_method("wei_levoy", levels=2, window=5, search="tsvq", leaf_size=4096).fit(ex).sample((24, 24), rng=0)
     np.testing.assert_array_equal(exact, tree)
-    approx = texsyn.make_method("wei_levoy", levels=2, window=5, search="tsvq", leaf_size=8).fit(ex).sample((24, 24), rng=0)
-    assert approx.shape == (24, 24)
+    approx = texsyn.make_method("wei_levoy", levels=2, window=5, search="tsvq", leaf_size=8).fit(ex)
+    result = approx.sample_with_map((24, 24), rng=0)
+    np.testing.assert_array_equal(result.image, ex[result.source_map[..., 0], result.source_map[..., 1]])
+    # small leaves: the tree search is approximate, yet it finds almost every exemplar
+    # neighbourhood itself (measured: 97.1 % at level 0, 99.6 % at level 1)
+    for bank, tree in zip(approx.banks_, approx.trees_):
+        found = np.array([tree.query(v) for v in bank])
+        assert np.mean(np.all(bank[found] == bank, axis=1)) > 0.9
 
 
 def test_bad_parameters():
@@ -128,7 +138,9 @@ def test_bad_parameters():
         texsyn.make_method("cwt", levels=4).fit(ex[:20, :20])
 
 
+@pytest.mark.method("wei_levoy")
 def test_wei_levoy_handles_tiny_coarse_levels():
     ex = texsyn.data.exemplar("gravel", size=64)
-    out = texsyn.make_method("wei_levoy").fit(ex).sample((24, 24), rng=0)  # coarsest level 3x3
-    assert out.shape == (24, 24)
+    result = texsyn.make_method("wei_levoy").fit(ex).sample_with_map((24, 24), rng=0)  # coarsest level 3x3
+    assert result.image.shape == (24, 24)
+    np.testing.assert_array_equal(result.image, ex[result.source_map[..., 0], result.source_map[..., 1]])

@@ -52,7 +52,7 @@ def test_skewness_and_kurtosis_are_imposed_keeping_mean_and_variance():
         assert abs(y.mean() - normal.mean()) < 1e-10 and abs(y.var() - normal.var()) < 1e-10
     # an unreachable target (kurtosis >= skewness^2 + 1) moves as close as it can, never away
     kurt = lambda v: np.mean((v - v.mean()) ** 4) / np.var(v) ** 2  # noqa: E731
-    assert abs(kurt(impose_kurtosis(x, 1.0)) - 1.0) <= abs(kurt(x) - 1.0)
+    assert abs(kurt(impose_kurtosis(x, 1.0)) - 1.0) < abs(kurt(x) - 1.0)  # measured 7.48 -> 6.42
 
 
 def test_correlation_adjustments_reach_their_targets():
@@ -81,6 +81,7 @@ def test_autocorrelation_is_pulled_toward_its_target():
     assert after < before / 3
 
 
+@pytest.mark.method("portilla_simoncelli")
 def test_synthesis_brings_the_statistics_close_to_the_exemplars():
     exemplar = texsyn.data.exemplar("brick", size=64)
     method = texsyn.make_method("portilla_simoncelli", n_scales=3, n_iterations=15).fit(exemplar)
@@ -93,6 +94,7 @@ def test_synthesis_brings_the_statistics_close_to_the_exemplars():
     assert abs(out.std() - exemplar.std()) < 0.01
 
 
+@pytest.mark.method("portilla_simoncelli")
 def test_colour_keeps_the_exemplars_channel_covariance(colour_exemplar):
     out = texsyn.synthesize(colour_exemplar, "portilla_simoncelli", (48, 56), rng=1, n_scales=2, n_iterations=8)
     assert out.shape == (48, 56, 3)
@@ -104,10 +106,16 @@ def test_colour_keeps_the_exemplars_channel_covariance(colour_exemplar):
     assert abs(corr(c_out) - corr(c_ex)) < 0.05
 
 
+@pytest.mark.method("portilla_simoncelli")
 def test_any_size_works(grey_exemplar):
     method = texsyn.make_method("portilla_simoncelli", n_scales=2, n_iterations=2).fit(grey_exemplar)
     for shape in ((45, 70), (13, 9), (33, 31)):
-        assert method.sample(shape, rng=0).shape == shape
+        out = method.sample(shape, rng=0).astype(np.float64)
+        assert out.shape == shape
+        # the pixel statistics are imposed at every size (measured: mean within 7e-4, standard
+        # deviation within 1.3 %; a blur takes 20-47 % of it)
+        assert abs(out.mean() - grey_exemplar.mean()) < 0.005
+        assert abs(out.std() / grey_exemplar.std() - 1) < 0.05
 
 
 def test_ps_statistics_describe_textures(grey_exemplar, colour_exemplar):
@@ -117,7 +125,9 @@ def test_ps_statistics_describe_textures(grey_exemplar, colour_exemplar):
     assert colour.magnitude_cross[0].shape == (12, 12)  # orientations x channels, jointly
     assert colour.colour_covariance.shape == (3, 3)
     brick = texsyn.data.exemplar("brick", size=128)
-    assert ps_distance(brick, brick) == 0
+    # spatial averages of a periodic pyramid: a circular shift keeps them (measured 0.006,
+    # against 0.27 for another crop of the same texture)
+    assert ps_distance(np.roll(brick, (17, 5), axis=(0, 1)), brick) < 0.02
     same = ps_distance(brick[:64, :64], brick[64:, 64:])
     other = ps_distance(texsyn.data.exemplar("grass", size=64), brick[64:, 64:])
     assert same < other / 3
