@@ -1,3 +1,4 @@
+import dataclasses
 import os
 import warnings
 
@@ -5,7 +6,14 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from texsyn.io import ImageReadError, read_image, write_array, write_image
+from texsyn.io import (
+    ImageHeader,
+    ImageReadError,
+    read_image,
+    read_image_header,
+    write_array,
+    write_image,
+)
 
 
 @pytest.fixture
@@ -120,3 +128,71 @@ def test_write_refuses_bad_requests_and_leaves_existing_files(tmp_path):
 def test_write_array(tmp_path):
     arr = np.arange(12).reshape(2, 3, 2)
     np.testing.assert_array_equal(np.load(write_array(tmp_path / "a.npy", arr)), arr)
+
+
+def test_cmyk_and_grey_jpeg(tmp_path, rgb8):
+    Image.fromarray(rgb8).convert("CMYK").save(tmp_path / "c.jpg")
+    Image.fromarray(rgb8).convert("L").save(tmp_path / "g.jpg")
+    cmyk = read_image(tmp_path / "c.jpg")
+    assert cmyk.shape == (12, 10, 3) and cmyk.dtype == np.float32
+    np.testing.assert_allclose(cmyk, rgb8 / 255.0, atol=0.2)  # lossy, but the colours survive
+    assert read_image(tmp_path / "g.jpg").shape == (12, 10)
+    header = read_image_header(tmp_path / "c.jpg")
+    assert (header.width, header.height, header.channels, header.format) == (10, 12, 3, "JPEG")
+
+
+def test_netpbm_family(tmp_path):
+    bits = np.random.default_rng(5).random((5, 7)) > 0.5  # True = white
+    plain_bits = b"\n".join(b"".join(b"0" if v else b"1" for v in row) for row in bits)
+    (tmp_path / "p1.pbm").write_bytes(b"P1\n# a comment\n7 5\n" + plain_bits)
+    Image.fromarray(bits).save(tmp_path / "p4.pbm")
+    for name in ("p1.pbm", "p4.pbm"):
+        np.testing.assert_array_equal(read_image(tmp_path / name), bits.astype(np.float32))
+    grey = np.random.default_rng(6).integers(0, 1001, (5, 7))
+    (tmp_path / "p2.pgm").write_bytes(b"P2 7 5 1000\n" + b"\n".join(b" ".join(b"%d" % v for v in row) for row in grey))
+    np.testing.assert_allclose(read_image(tmp_path / "p2.pgm"), grey / 1000.0, atol=1e-7)
+    colour = np.random.default_rng(7).integers(0, 256, (5, 7, 3))
+    (tmp_path / "p3.ppm").write_bytes(b"P3\n7 5\n255\n" + b" ".join(b"%d" % v for v in colour.ravel()))
+    np.testing.assert_allclose(read_image(tmp_path / "p3.ppm"), colour / 255.0, atol=1e-7)
+    header = read_image_header(tmp_path / "p2.pgm")
+    assert (header.width, header.height, header.channels, header.bit_depth, header.format) == (7, 5, 1, 10, "PNM")
+
+
+def test_sixteen_bit_grey_alpha_png_and_colour_tiff(tmp_path):
+    import png
+    import tifffile
+
+    data = (np.random.default_rng(8).random((6, 5, 2)) * 65535).astype(np.uint16)
+    with open(tmp_path / "la.png", "wb") as fh:
+        png.Writer(5, 6, greyscale=True, alpha=True, bitdepth=16).write(fh, data.reshape(6, -1).tolist())
+    np.testing.assert_allclose(read_image(tmp_path / "la.png", keep_alpha=True), data / 65535.0, atol=1e-7)
+    rgb = (np.random.default_rng(9).random((6, 5, 3)) * 65535).astype(np.uint16)
+    tifffile.imwrite(tmp_path / "c.tif", rgb, compression="zlib")
+    np.testing.assert_allclose(read_image(tmp_path / "c.tif"), rgb / 65535.0, atol=1e-7)
+    assert read_image_header(tmp_path / "c.tif").bit_depth == 16
+
+
+def test_compressed_tiff_and_transparent_palette(tmp_path, rgb8):
+    Image.fromarray(rgb8).save(tmp_path / "lzw.tif", compression="tiff_lzw")
+    np.testing.assert_array_equal(np.rint(read_image(tmp_path / "lzw.tif") * 255), rgb8)
+    palette = Image.fromarray(rgb8).convert("P")
+    palette.save(tmp_path / "t.png", transparency=int(np.asarray(palette)[0, 0]))
+    assert read_image_header(tmp_path / "t.png").channels == 4
+    assert read_image(tmp_path / "t.png", keep_alpha=True).shape == (12, 10, 4)
+
+
+def test_header_is_read_without_decoding(tmp_path, rgb8, monkeypatch):
+    import texsyn.io.reading as reading
+
+    Image.fromarray(rgb8).save(tmp_path / "x.png")
+    monkeypatch.setattr(reading, "_decode", lambda *a, **k: pytest.fail("decoded"))
+    header = read_image_header(tmp_path / "x.png")
+    assert header == ImageHeader(width=10, height=12, channels=3, bit_depth=8, format="PNG")
+    assert header.pixels == 120 and header.decoded_bytes == 120 * 3 * 5
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        header.width = 3
+    with pytest.raises(FileNotFoundError, match="no such file"):
+        read_image_header(tmp_path / "missing.png")
+    (tmp_path / "text.png").write_text("not an image")
+    with pytest.raises(ImageReadError, match="text.png"):
+        read_image_header(tmp_path / "text.png")
