@@ -1,5 +1,8 @@
 """The command line through its entry point: exit codes, files written, nothing on error."""
 
+import json
+import shlex
+
 import numpy as np
 import pytest
 from PIL import Image
@@ -57,7 +60,8 @@ def test_synth_without_exemplar_uses_the_builtin(tmp_path, capsys):
     assert code == 0
     assert read_image(out).shape == (64, 64)
     assert "built-in brick" in err
-    assert run(capsys, "synth", "builtin:grass", "-o", out, "--size", "40x40", "-q")[0] == 0
+    assert run(capsys, "synth", "builtin:grass", "-o", out, "--size", "40x40", "-q", "--overwrite")[0] == 0
+    assert read_image(out).shape == (40, 40)
 
 
 def test_methods_lists_every_method_with_parameters(capsys):
@@ -115,7 +119,8 @@ BAD_INPUTS = [
     ("out of range", lambda t: ["-p", "patch_size=-3"], "must be in [2, 1024], got -3"),
     ("not a number", lambda t: ["-p", "tolerance=abc"], "parameter 'tolerance'"),
     ("malformed parameter", lambda t: ["-p", "patch_size"], "NAME=VALUE"),
-    ("too large", lambda t: ["--size", "200000x200000"], "memory"),
+    ("too large", lambda t: ["--size", "90000x90000"], "memory"),
+    ("side too large", lambda t: ["--size", "200000x200000"], "at most 100000"),
     ("bad size", lambda t: ["--size", "12by4"], "WIDTHxHEIGHT"),
     ("size and scale", lambda t: ["--size", "10x10", "--scale", "2"], "either --size or --scale"),
     ("no source map", lambda t: ["-m", "random_phase", "--source-map", t / "s.npy"], "no source map"),
@@ -134,6 +139,7 @@ def test_bad_input_one_line_exit_2_no_output(tmp_path, capsys, label, make_args,
     assert message in lines[0]
     assert "Traceback" not in err
     assert not out.exists()
+    assert not (tmp_path / "out.png.json").exists()
     leftovers = [p.name for p in tmp_path.iterdir() if p.name.startswith(".")]
     assert leftovers == []
 
@@ -159,3 +165,67 @@ def test_unsupported_output_type_and_usage_errors(tmp_path, capsys):
     assert code == 2 and len(err.strip().splitlines()) == 1 and "--output" in err
     code, _, err = run(capsys, "frobnicate")
     assert code == 2 and len(err.strip().splitlines()) == 1
+
+
+def test_no_arguments_prints_the_help(capsys):
+    code, out, err = run(capsys)
+    assert code == 0 and err == ""
+    assert "Usage: texsyn" in out and "synth" in out and "--debug" in out
+
+
+def test_synth_writes_a_sidecar_with_method_parameters_seed_and_command(tmp_path, exemplar_file, capsys):
+    out, src = tmp_path / "out.png", tmp_path / "where.npy"
+    args = ["synth", exemplar_file, "-o", out, "--size", "40x32", "--seed", "11", "-p", "patch_size=12", "--source-map", src, "-q"]
+    code, _, err = run(capsys, *args)
+    assert code == 0, err
+    side = json.loads((tmp_path / "out.png.json").read_text())
+    assert side["texsyn_version"] == texsyn.__version__
+    assert side["command"] == "synth" and side["method"] == "quilting"
+    assert side["params"] == {k: list(v) if isinstance(v, tuple) else v for k, v in texsyn.make_method("quilting", patch_size=12).get_params().items()}
+    assert side["seed"] == 11
+    assert side["inputs"] == {"exemplar": str(exemplar_file)}
+    assert side["outputs"] == {"image": str(out), "source_map": str(src), "sidecar": str(out) + ".json"}
+    assert side["options"]["size"] == [40, 32]
+    assert shlex.split(side["command_line"]) == ["texsyn"] + [str(a) for a in args]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ex.png", "out.png", "out.png.json", "where.npy"]
+
+
+def test_a_drawn_seed_is_printed_recorded_and_reproduces_the_texture(tmp_path, exemplar_file, capsys):
+    first, second = tmp_path / "a.png", tmp_path / "b.png"
+    code, _, err = run(capsys, "synth", exemplar_file, "-o", first, "-m", "random_phase")
+    assert code == 0, err
+    seeds = [line for line in err.splitlines() if line.startswith("seed: ")]
+    assert len(seeds) == 1
+    seed = int(seeds[0].split()[1])
+    assert 0 <= seed < 2**32
+    assert json.loads((tmp_path / "a.png.json").read_text())["seed"] == seed
+    code, _, err = run(capsys, "synth", exemplar_file, "-o", second, "-m", "random_phase", "--seed", seed)
+    assert code == 0 and "seed:" not in err  # printed only when drawn
+    assert first.read_bytes() == second.read_bytes()
+    code, _, err = run(capsys, "synth", exemplar_file, "-o", tmp_path / "c.png", "-m", "random_phase", "-q")
+    assert code == 0 and err == ""  # --quiet: no seed line either
+
+
+def test_overwrite_replaces_the_output_and_its_sidecar(tmp_path, exemplar_file, capsys):
+    out = tmp_path / "out.png"
+    assert run(capsys, "synth", exemplar_file, "-o", out, "--size", "20x20", "-m", "random_phase", "--seed", "1", "-q")[0] == 0
+    assert run(capsys, "synth", exemplar_file, "-o", out, "--size", "30x20", "-m", "random_phase", "--seed", "2", "-q", "--overwrite")[0] == 0
+    assert read_image(out).shape == (20, 30)
+    assert json.loads((tmp_path / "out.png.json").read_text())["seed"] == 2
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ex.png", "out.png", "out.png.json"]
+
+
+def test_modify_and_animate_write_sidecars(tmp_path, exemplar_file, capsys):
+    out = tmp_path / "m.png"
+    code, _, err = run(capsys, "modify", exemplar_file, "-e", exemplar_file, "-o", out, "-q", "-p", "lle_points=64")
+    assert code == 0, err
+    side = json.loads((tmp_path / "m.png.json").read_text())
+    assert side["method"] == "patch_wavelet" and side["seed"] is None
+    assert side["inputs"] == {"input": str(exemplar_file), "exemplar": str(exemplar_file)}
+    assert side["options"]["ratio"] == 0.5
+    frames = tmp_path / "frames"
+    code, _, err = run(capsys, "animate", "builtin:brick", "-o", frames, "--frames", "2", "--size", "16x16", "-q", "-p", "n_iterations=1")
+    assert code == 0, err
+    side = json.loads((tmp_path / "frames.json").read_text())
+    assert side["method"] == "grouplets" and isinstance(side["seed"], int)
+    assert side["outputs"]["frames"] == str(frames) and side["options"]["frames"] == 2

@@ -269,7 +269,7 @@ def test_cli_animate_writes_videos_and_frame_folders(tmp_path, capsys, name):
         with iio2.get_reader(out) as reader:
             count = sum(1 for _ in reader)
         assert count == 4
-    assert [p.name for p in tmp_path.iterdir()] == [name]  # no temporary left behind
+    assert sorted(p.name for p in tmp_path.iterdir()) == [name, name + ".json"]  # output, sidecar, no temporary
 
 
 @pytest.mark.parametrize(

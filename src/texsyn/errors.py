@@ -20,7 +20,9 @@ __all__ = [
     "ImageTooLargeError",
     "MemoryLimitError",
     "OutputExistsError",
+    "OutputFolderNotFoundError",
     "OutputPathError",
+    "OutputWriteError",
 ]
 
 
@@ -54,3 +56,18 @@ class OutputPathError(InputError):
 
 class OutputExistsError(OutputPathError, FileExistsError):
     """An output file exists and ``overwrite`` was not asked for."""
+
+
+class OutputFolderNotFoundError(OutputPathError, FileNotFoundError):
+    """The folder an output should go to does not exist."""
+
+
+class OutputWriteError(OSError):
+    """Writing an output failed (disk full, permission denied, I/O error...).
+
+    Not an :class:`InputError`: the request was valid but the system could not honour it
+    (the command line exits with status 1). Nothing of the failed output set is left behind.
+    """
+
+    def __str__(self) -> str:
+        return self.strerror or super().__str__()

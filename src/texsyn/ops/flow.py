@@ -14,6 +14,8 @@ import numba
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
+from ..errors import InputError
+
 __all__ = [
     "association_fields",
     "builtin_flow",
@@ -240,9 +242,14 @@ def builtin_flow(name: str, shape: tuple[int, int]) -> np.ndarray:
     if key.startswith("constant"):
         _, _, text = key.partition(":")
         try:
-            angle = math.radians(float(text)) if text else 0.0
+            degrees = float(text) if text else 0.0
         except ValueError:
-            raise ValueError(f"flow 'constant:ANGLE' needs ANGLE in degrees, got {name!r}") from None
+            degrees = math.nan
+        if key[len("constant"):][:1] not in ("", ":") or not math.isfinite(degrees):
+            raise InputError(
+                f"flow 'constant:ANGLE' needs ANGLE as a finite number of degrees (e.g. constant:30), got {name!r}"
+            )
+        angle = math.radians(degrees)
         return np.stack([np.full((h, w), -math.sin(angle)), np.full((h, w), math.cos(angle))], axis=-1)
     if key == "sources":
         # two sources and two vortices with Gaussian envelopes, on wrapped displacements
@@ -258,4 +265,4 @@ def builtin_flow(name: str, shape: tuple[int, int]) -> np.ndarray:
         return field
     if key == "waves":
         return np.stack([0.6 * np.cos(2 * np.pi * 2 * c / w), np.ones((h, w))], axis=-1)
-    raise ValueError(f"unknown flow {name!r}; choose 'learned', 'vortex', 'constant:ANGLE', 'sources' or 'waves'")
+    raise InputError(f"unknown flow {name!r}; choose 'learned', 'vortex', 'constant:ANGLE', 'sources' or 'waves'")

@@ -24,10 +24,10 @@ import numpy as np
 from .. import __version__
 from ..methods import METHODS, Progress, make_method
 from ..metrics import METRIC_DESCRIPTIONS, evaluate, nearest_patch_field, synthesis_map
-from ..errors import InputError, OutputExistsError
+from ..errors import InputError
 from ..ops.linalg import fixed_order
 
-__all__ = ["MethodRun", "MethodRecord", "Report", "run_comparison", "write_report"]
+__all__ = ["MethodRun", "MethodRecord", "Report", "claim_report", "report_paths", "run_comparison", "write_report"]
 
 
 @dataclass
@@ -296,30 +296,49 @@ def run_comparison(
     )
 
 
-def write_report(report: Report, path: str | Path, *, overwrite: bool = False) -> tuple[Path, Path]:
+def report_paths(path: str | Path) -> tuple[Path, Path]:
+    """The HTML page and its JSON sidecar (same name, ``.json``) of a report written to ``path``."""
+    html_path = Path(path)
+    return html_path, html_path.with_suffix(".json")
+
+
+def claim_report(outputs, path: str | Path) -> tuple[Path, Path]:
+    """Check and reserve a report's two files in an :class:`~texsyn.io.OutputSet` (before any work)."""
+    html_path, json_path = report_paths(path)
+    outputs.claim(html_path, formats={".html": (8,), ".htm": (8,)}, what="report")
+    outputs.claim(json_path, formats={".json": (8,)}, what="report sidecar")
+    return html_path, json_path
+
+
+def write_report(
+    report: Report,
+    path: str | Path,
+    *,
+    overwrite: bool = False,
+    outputs=None,
+    metadata: dict | None = None,
+) -> tuple[Path, Path]:
     """Write ``report`` as ``path`` (HTML) and its JSON sidecar (same name, ``.json``).
 
-    Refuses to replace existing files unless ``overwrite``; both writes are atomic.
+    Both files are written together or not at all. Refuses to replace existing files unless
+    ``overwrite``. ``outputs`` is an :class:`~texsyn.io.OutputSet` in which the two files
+    were already claimed with :func:`claim_report` (the command line checks them before the
+    comparison runs); ``metadata`` adds top-level keys to the JSON (e.g. the command line).
     """
-    from ..io import atomic_write, check_output_path
+    from ..io import OutputSet
 
-    html_path = check_output_path(path, formats={".html": (8,), ".htm": (8,)})
-    json_path = html_path.with_suffix(".json")
-    if not overwrite:
-        for p in (html_path, json_path):
-            if p.exists():
-                raise OutputExistsError(f"'{p}' already exists; use --overwrite to replace it")
+    if outputs is None:
+        outputs = OutputSet(overwrite=overwrite)
+    html_path, json_path = report_paths(path)
+    if not (outputs.claimed(html_path) and outputs.claimed(json_path)):
+        claim_report(outputs, path)
     page = report.to_html()
-    data = json.dumps(report.to_dict(), indent=2)
-
-    def write_text(text):
-        def writer(tmp):
-            Path(tmp).write_text(text, encoding="utf-8")
-
-        return writer
-
-    atomic_write(json_path, write_text(data))
-    atomic_write(html_path, write_text(page))
+    data = report.to_dict()
+    if metadata:
+        data.update(metadata)
+    with outputs:
+        outputs.write_text(html_path, page)
+        outputs.write_text(json_path, json.dumps(data, indent=2))
     return html_path, json_path
 
 
