@@ -2,11 +2,11 @@
 
 import numpy as np
 import pytest
+from strength_utils import autocorrelation_gap
 
 import texsyn
 from texsyn.cli import main
 from texsyn.io import read_image
-from texsyn.metrics import histogram_distance
 from texsyn.ops.flow import association_fields, builtin_flow, orient_field, structure_tensor_orientation
 from texsyn.ops.fluid import advect, diffuse, divergence, project
 from texsyn.ops.grouplets import GroupletTransform, WaveletGroupletTransform
@@ -163,11 +163,22 @@ def test_histogram_step_gives_every_band_the_exemplars_values(oriented):
     np.testing.assert_array_equal(np.sort(pixels.ravel()), model.pixel_values[0])
 
 
-def test_output_pixel_histogram_is_the_exemplars(oriented):
-    out = texsyn.synthesize(oriented, "grouplets", (48, 48), rng=0, n_iterations=3)
-    np.testing.assert_allclose(np.sort(out.ravel()), np.sort(oriented.ravel()), atol=1e-6)
+@pytest.mark.method("grouplets")
+def test_output_has_the_exemplars_band_histograms(oriented):
+    # (the output's pixel histogram is the exemplar's by construction: the last projection)
+    method = texsyn.make_method("grouplets", n_iterations=3).fit(oriented)
+    model = method.model_
+    transform = model.transform(method.flow_field((48, 48)))
+    out = method.sample((48, 48), rng=0)
+    coefficients = transform.forward(out.astype(np.float64)[..., None])
+    values = np.sort(coefficients.reshape(coefficients.shape[:3] + (-1,)), axis=-1)
+    gaps = np.sqrt(np.mean((values - model.band_values) ** 2, axis=-1)) / model.pixel_values.std()
+    # largest band gap (RMS of sorted differences over the pixel deviation), seeds 0-3:
+    # output 0.54 .. 0.76; shuffled 3.2; blurred 1.9 .. 2.0; the white noise it starts from 3.2
+    assert gaps.max() <= 1.2, gaps.max()
 
 
+@pytest.mark.method("grouplets")
 def test_geometry_follows_a_vortex(oriented):
     _, coherence_in = structure_tensor_orientation(oriented)
     assert coherence_in.mean() > 0.5
@@ -219,10 +230,12 @@ def test_every_frame_flow_is_divergence_free(frames):
     assert not np.array_equal(frames[0].image, frames[-1].image)
 
 
+@pytest.mark.method("animate")
 def test_dynamic_run_keeps_the_exemplar_statistics(frames, oriented):
     first, last = frames[1].image, frames[-1].image
-    d1, d2 = histogram_distance(first, oriented), histogram_distance(last, oriented)
-    assert abs(d2 - d1) <= 0.1 * max(d1, 1e-3)
+    # neighbour correlations of the last frame against the exemplar, seeds 0, 1, 3: 0.001 ..
+    # 0.033; shuffled 0.97 .. 1.00, blurred 0.10 .. 0.13
+    assert autocorrelation_gap(last, oriented) <= 0.06
     frame = LaplacianTightFrame((48, 48), 3)
     e1 = np.sum(frame.forward(first - first.mean()) ** 2, axis=(1, 2))
     e2 = np.sum(frame.forward(last - last.mean()) ** 2, axis=(1, 2))

@@ -18,10 +18,9 @@ def test_sampled_patches_have_the_estimated_mean_and_covariance():
     cov = np.cov(samples, rowvar=False)
     np.testing.assert_allclose(gauss.mean, mean)
     np.testing.assert_allclose(gauss.factor @ gauss.factor.T, cov, atol=1e-12)
-    g = rng.standard_normal((draws, m))
-    drawn = gauss.mean + g @ gauss.factor.T  # the same formula as LocalGaussian.sample
-    one = np.array([gauss.sample(np.random.default_rng(5))])
-    assert one.shape == (1, dim)
+    draw = np.random.default_rng(5)
+    drawn = np.array([gauss.sample(draw) for _ in range(draws)])  # the sampler itself
+    assert drawn.shape == (draws, dim)
     err = np.linalg.norm(np.cov(drawn, rowvar=False) - cov) / np.linalg.norm(cov)
     assert err < 3 * np.sqrt((m + 1) / draws)
     assert np.abs(drawn.mean(axis=0) - mean).max() < 5 * np.sqrt(cov.diagonal().max() / draws)
@@ -57,6 +56,7 @@ def overlap_values_kept(name, exemplar, **params):
     return method.sample((28, 28), rng=3)
 
 
+@pytest.mark.method("clg", "rclg")
 def test_clg_keeps_overlaps_and_rclg_moves_them_by_about_theta(monkeypatch):
     ex = texsyn.data.exemplar("gravel", size=40).astype(np.float64)
     from texsyn.methods import gaussian as module
@@ -130,6 +130,7 @@ def test_raster_positions_cover_the_end():
     np.testing.assert_array_equal(raster_positions(10, 10, 5), [0])
 
 
+@pytest.mark.method("lg")
 def test_lg_innovates_where_quilting_copies_blocks():
     ex = texsyn.data.exemplar("gravel", size=64)
     lg = texsyn.synthesize(ex, "lg", (96, 96), rng=0, patch_size=16, n_neighbors=10)
@@ -189,6 +190,7 @@ def period_strength(image, axis, lag):
     return float(values.max())
 
 
+@pytest.mark.method("mslg")
 def test_multiscale_reproduces_the_brick_period_that_one_scale_loses():
     ex = texsyn.data.exemplar("brick", size=128)  # bricks about 30 px wide, patches of 10
     axis, lag, peak = dominant_period(ex)
