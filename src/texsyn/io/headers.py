@@ -1,22 +1,38 @@
 """Image headers read without decoding pixels, and the pixel budget checked against them.
 
-Every format texsyn reads has its header parsed here by a small, bounded parser: each read
-is checked against the file's length, every loop advances through the file, and nothing is
-allocated in proportion to what a header *declares*. The header is then compared with the
-pixel budget (``TEXSYN_MAX_PIXELS``) before a single pixel is decoded, so that a small file
-that declares a huge image (a "decompression bomb") is refused at once and cheaply.
+A header comes from Pillow's lazy open: a format plugin reads the file's header (size,
+mode, for TIFF its tags) and decodes nothing until ``load()``. texsyn takes the two steps
+``Image.open`` takes (the plugin's ``accept`` on the first bytes, then its factory) without
+the third, Pillow's own pixel-count check, so that texsyn's budget answers first. Where
+Pillow hides what texsyn needs, a tiny read at fixed offsets completes it:
 
-See ``docs/reading.md`` for the policy.
+- PNG: the IHDR fields at bytes 16-28 (Pillow's mode does not say that a colour PNG is
+  16-bit, and the decoder's guard needs the exact size of the pixel data);
+- WebP: the canvas size in the first 30 bytes, read *instead of* Pillow's open, which reads
+  the whole file and creates libwebp's decoder (that allocates the canvas);
+- PNM: the header's tokens (at most 64 KiB), so that a message names the missing or
+  impossible field and a file too short for its declared size is called truncated;
+- TIFF that Pillow has no mode for (16-bit grey + alpha, float RGB, 64-bit float): the
+  first page's header, from tifffile.
+
+Two checks are added where Pillow's decoders are lenient, from Pillow's own tiles (where
+it will read the pixel data): the rows of an uncompressed BMP, padding included, must lie
+within the file, and the strips of an uncompressed TIFF must cover the whole image.
+
+The header is then compared with the pixel budget (``TEXSYN_MAX_PIXELS``) before a single
+pixel is decoded, so that a small file that declares a huge image (a "decompression bomb")
+is refused at once and cheaply. See ``docs/reading.md`` for the policy.
 """
 
 from __future__ import annotations
 
+import functools
 import os
 import re
 import stat
 import struct
-import zlib
-from dataclasses import dataclass
+import warnings
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import BinaryIO
 
@@ -49,15 +65,8 @@ DEFAULT_MAX_PIXELS = 40_000_000
 #: plus its float32 copy (16 bytes). The memory budget is this times the pixel budget.
 REFERENCE_BYTES_PER_PIXEL = 20
 
-#: Largest width or height any format texsyn reads may declare (PNG's own limit, 2**31 - 1).
-_MAX_SIDE = 2**31 - 1
 #: A PNM header (magic, comments, sizes) longer than this is refused.
 _MAX_PNM_HEADER = 64 * 1024
-#: A TIFF directory with more entries than this is refused (real files hold a few dozen).
-_MAX_TIFF_ENTRIES = 4096
-
-#: Headers are read through a cache of this many bytes (many small reads, few system calls).
-_WINDOW = 64 * 1024
 
 _FORMAT_NAMES = "PNG, JPEG, TIFF, BMP, GIF, WebP, PNM (PBM/PGM/PPM)"
 
@@ -74,10 +83,11 @@ class ImageHeader:
         Channels texsyn decodes the image to, alpha included: 1 (grey), 2 (grey + alpha),
         3 (RGB) or 4 (RGBA). Palette images count as RGB (RGBA with a transparent entry);
         CMYK and YCbCr images count as RGB, since that is what they are converted to.
-        For a palette BMP this is an upper bound (a grey palette decodes to 1 channel).
+        For WebP this is what the header's alpha flag says.
     bit_depth : int
-        Bits per sample stored in the file: 1, 2, 4, 8 or 16 for most formats, the PNM
-        maxval's bit length (e.g. 12 for maxval 4095), 32 or 64 for float TIFF.
+        Bits per sample: as stored for PNG (1-16) and TIFF (1-16; 32 or 64 for float),
+        the maxval's bit length for PNM (e.g. 12 for maxval 4095); otherwise that of
+        Pillow's mode: 8, or 1 for a bilevel BMP.
     format : str
         ``"PNG"``, ``"JPEG"``, ``"TIFF"``, ``"BMP"``, ``"GIF"``, ``"WEBP"`` or ``"PNM"``.
     """
@@ -221,44 +231,17 @@ def _error(path: str | os.PathLike, problem: str) -> ImageReadError:
     return ImageReadError(f"cannot read '{_show(path)}': {problem}")
 
 
-class _Source:
-    """A binary file with reads checked against its length (every read names what it wanted)."""
-
-    def __init__(self, fh: BinaryIO, size: int, path: str | os.PathLike, fmt: str):
-        self.fh = fh
-        self.size = size
-        self.path = path
-        self.fmt = fmt
-        self._window: tuple[int, bytes] = (0, b"")
-
-    def fail(self, problem: str) -> ImageReadError:
-        return _error(self.path, problem)
-
-    def truncated(self, what: str, end: int) -> ImageReadError:
-        return self.fail(
-            f"truncated {self.fmt} file ({what} would end at byte {end}, the file has {self.size} bytes)"
-        )
-
-    def read(self, offset: int, n: int, what: str) -> bytes:
-        if offset < 0 or n < 0 or offset + n > self.size:
-            raise self.truncated(what, offset + n)
-        start, window = self._window
-        if start <= offset and offset + n <= start + len(window):
-            return window[offset - start : offset - start + n]
-        self.fh.seek(offset)
-        data = self.fh.read(max(n, _WINDOW) if n <= _WINDOW else n)
-        if len(data) < n:
-            raise self.truncated(what, offset + n)
-        if n <= _WINDOW:
-            self._window = (offset, data)
-        return data[:n]
-
-    def unpack(self, fmt: str, offset: int, what: str) -> tuple:
-        return struct.unpack(fmt, self.read(offset, struct.calcsize(fmt), what))
+def _said(exc: BaseException, path: str | os.PathLike) -> str:
+    """A library's complaint, in one short line, without the path (the message names it once)."""
+    text = str(exc)
+    for name in {os.fspath(path), str(Path(path)), Path(path).name} - {""}:
+        text = text.replace(repr(name), "it").replace(name, "it")
+    return (" ".join(text.split()) or type(exc).__name__)[:90]
 
 
 def _open_checked(path: str | os.PathLike) -> tuple[BinaryIO, int]:
-    """Open a regular file for reading; refuse missing files, folders and special files."""
+    """Open a regular file for reading; refuse missing files, folders and special files
+    (a pipe is never opened, so that a read cannot block)."""
     p = Path(path)
     try:
         st = p.stat()
@@ -274,8 +257,98 @@ def _open_checked(path: str | os.PathLike) -> tuple[BinaryIO, int]:
         fh = open(p, "rb")
     except OSError as exc:
         raise _error(path, f"cannot open it ({exc.strerror or type(exc).__name__})") from None
-    size = os.fstat(fh.fileno()).st_size
-    return fh, size
+    return fh, os.fstat(fh.fileno()).st_size
+
+
+# --------------------------------------------------------------------------- libraries
+
+
+@functools.cache
+def _quiet_library_logs() -> None:
+    """Keep Pillow's and tifffile's log records about odd files off stderr.
+
+    Both log complaints about a broken file (e.g. Pillow's TIFF plugin: "More samples per
+    pixel than can be decoded") before raising; with no handler configured, Python's
+    last-resort handler would print them beside texsyn's one-line error. A ``NullHandler``
+    on their loggers stops that; an application that configures logging still gets them.
+    """
+    import logging
+
+    for name in ("PIL", "tifffile"):
+        logging.getLogger(name).addHandler(logging.NullHandler())
+
+
+# --------------------------------------------------------------------------- Pillow
+
+#: The Pillow formats texsyn reads (PNM is recognised by texsyn, see _probe_pnm).
+_PILLOW_FORMATS = ("PNG", "JPEG", "TIFF", "GIF", "WEBP", "BMP")
+
+#: Pillow mode -> the mode texsyn decodes it to (``P``: RGB, or RGBA with transparency).
+_PIL_TARGETS = {
+    "1": "1", "L": "L", "LA": "LA", "RGB": "RGB", "RGBA": "RGBA", "I": "I", "F": "F",
+    "I;16": "I;16", "I;16L": "I;16L", "I;16B": "I;16B", "I;16N": "I;16N",
+    "PA": "RGBA", "La": "LA", "RGBa": "RGBA", "RGBX": "RGB",
+    "CMYK": "RGB", "YCbCr": "RGB", "LAB": "RGB", "HSV": "RGB",
+}
+
+
+@functools.cache
+def _pillow():
+    """PIL.Image with the plugins of the formats texsyn reads registered."""
+    _quiet_library_logs()
+    from PIL import (  # noqa: F401 - importing a plugin registers its format
+        BmpImagePlugin,
+        GifImagePlugin,
+        Image,
+        JpegImagePlugin,
+        PngImagePlugin,
+        PpmImagePlugin,
+        TiffImagePlugin,
+        WebPImagePlugin,
+    )
+
+    return Image
+
+
+def _pillow_open(fh: BinaryIO, fmt: str, path: str | os.PathLike):
+    """Pillow's lazy open of ``fh`` as format ``fmt``: the header is read, nothing is decoded.
+
+    This is ``Image.open(fh, formats=[fmt])`` without its last step, Pillow's pixel-count
+    check (``Image.MAX_IMAGE_PIXELS``), which would refuse or warn about an image before
+    texsyn can check its own budget, and whose error does not say the image's size.
+    Where a plugin still runs that check itself (a WebP, GIF frame or TIFF tile beyond
+    Pillow's limit), its error becomes an :class:`ImageTooLargeError`.
+
+    Raises
+    ------
+    ImageReadError
+        Pillow cannot read the header; the message is Pillow's, in one line.
+    """
+    Image = _pillow()
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # EXIF and metadata complaints are not the user's concern
+            return Image.OPEN[fmt][0](fh, os.fspath(path))
+    except Image.DecompressionBombError:
+        raise ImageTooLargeError(
+            f"'{_show(path)}' declares more than {_amount(2 * (Image.MAX_IMAGE_PIXELS or 0))} pixels, "
+            f"which Pillow refuses to decode (PIL.Image.MAX_IMAGE_PIXELS)"
+        ) from None
+    except MemoryError:
+        raise
+    except Exception as exc:  # SyntaxError, OSError, ValueError, struct.error...
+        raise _error(path, f"corrupt or unsupported {fmt} file ({_said(exc, path)})") from None
+
+
+def _pillow_target(im) -> str:
+    """The Pillow mode texsyn decodes an image of mode ``im.mode`` to."""
+    if im.mode == "P":
+        return "RGBA" if "transparency" in im.info else "RGB"
+    return _PIL_TARGETS.get(im.mode, "")
+
+
+def _mode_bits(mode: str) -> int:
+    return 1 if mode == "1" else 16 if mode.startswith("I;16") else 32 if mode in ("I", "F") else 8
 
 
 # --------------------------------------------------------------------------- probing
@@ -283,20 +356,28 @@ def _open_checked(path: str | os.PathLike) -> tuple[BinaryIO, int]:
 
 @dataclass(frozen=True)
 class _Probe:
-    """A header plus what the decoder needs to know about the file's layout."""
+    """A header, plus how to decode the file and what the decoder must check.
+
+    ``decoder`` is ``"pillow"``, ``"pypng"``, ``"tifffile"`` or ``"numpy"`` (raw PNM);
+    ``mode`` and ``target`` are Pillow's mode at open and the mode to decode to (``None``
+    where Pillow did not open the file); ``details`` holds what the guards need.
+    """
 
     header: ImageHeader
-    info: dict
+    decoder: str = "pillow"
+    mode: str | None = None
+    target: str | None = None
+    details: dict = field(default_factory=dict)
 
 
 def read_image_header(path: str | os.PathLike) -> ImageHeader:
     """Read an image file's header (size, channels, bit depth, format) without decoding pixels.
 
-    The header is parsed by a small bounded parser for each format, every read checked
-    against the file's length; structural lies that can be seen without decoding (a
-    declared size larger than the data, zero sizes, impossible bit depths, PNM maxval out
-    of range, chunks or tags running past the end of the file) are reported here.
-    The pixel budget is *not* applied: see :func:`check_image_size`.
+    The header is what Pillow's lazy open reads, completed by a few bytes read at fixed
+    offsets where Pillow does not tell (see the module's docstring); a header that Pillow
+    cannot read, a zero or impossible size, a PNM maxval out of range or a PNM file too
+    short for its declared size are reported here. The pixel budget is *not* applied: see
+    :func:`check_image_size`.
 
     Parameters
     ----------
@@ -327,427 +408,213 @@ def _probe(path: str | os.PathLike) -> _Probe:
     fh, size = _open_checked(path)
     try:
         with fh:
-            return _probe_open(fh, size, path)
+            probe = _probe_open(fh, size, path)
     except InputError:
         raise
     except MemoryError:
         raise _error(path, "not enough memory to read its header") from None
-    except Exception as exc:  # a read error, or a case the parsers did not foresee
-        text = " ".join(str(exc).split())[:80] or type(exc).__name__
-        raise _error(path, f"unreadable image header ({text})") from None
+    except Exception as exc:  # a read error, or a case nobody foresaw
+        raise _error(path, f"unreadable image header ({_said(exc, path)})") from None
+    h = probe.header
+    if h.width < 1 or h.height < 1 or not 1 <= h.channels <= 4:
+        raise _error(path, f"the {h.format} header declares an impossible image "
+                           f"({h.width}x{h.height}, {h.channels} channels)")
+    return probe
 
 
 def _probe_open(fh: BinaryIO, size: int, path: str | os.PathLike) -> _Probe:
     if size == 0:
         raise _error(path, "the file is empty (0 bytes)")
     head = fh.read(16)
-    for magic, fmt, parser in _SIGNATURES:
-        if head.startswith(magic) and (fmt != "WEBP" or head[8:12] == b"WEBP"):
-            return parser(_Source(fh, size, path, fmt))
-    if len(head) >= 2 and head[0] == 0x50 and 0x31 <= head[1] <= 0x36 and (
-        len(head) == 2 or head[2] in _WHITESPACE or head[2] == 0x23
-    ):
-        return _probe_pnm(_Source(fh, size, path, "PNM"))
-    if len(head) < 16 and any(m.startswith(head) for m, _, _ in _SIGNATURES):
-        raise _error(path, f"truncated image file ({size} bytes)")
-    raise _error(path, f"not an image file texsyn knows; it reads {_FORMAT_NAMES}")
-
-
-def _check_side(src: _Source, width: int, height: int) -> None:
-    if width < 1 or height < 1 or width > _MAX_SIDE or height > _MAX_SIDE:
-        raise src.fail(f"the {src.fmt} header declares an impossible size {width}x{height}")
+    if _PNM_MAGIC.match(head):
+        return _probe_pnm(fh, size, path)
+    Image = _pillow()
+    for fmt in _PILLOW_FORMATS:
+        accepted = Image.OPEN[fmt][1](head)
+        if isinstance(accepted, str):  # e.g. "WEBP support not installed"
+            raise _error(path, accepted)
+        if accepted:
+            break
+    else:
+        raise _error(path, f"not an image file texsyn knows; it reads {_FORMAT_NAMES}")
+    if fmt == "WEBP":
+        return _probe_webp(fh, path)
+    fh.seek(0)
+    try:
+        im = _pillow_open(fh, fmt, path)
+    except ImageTooLargeError:
+        raise
+    except ImageReadError as exc:
+        if fmt == "TIFF":  # Pillow has no mode for it: perhaps tifffile reads it
+            return _probe_tifffile(path, exc)
+        raise
+    with im:
+        target = _pillow_target(im)
+        if not target:
+            raise _error(path, f"unsupported {fmt} pixel mode {im.mode}")
+        bits = getattr(im, "bits", 8) if fmt == "JPEG" else _mode_bits(im.mode)
+        header = ImageHeader(im.size[0], im.size[1], Image.getmodebands(target), bits, fmt)
+        probe = _Probe(header, "pillow", im.mode, target)
+        if fmt == "PNG":
+            return _probe_png(im, fh, probe, path)
+        if fmt == "TIFF":
+            return _probe_tiff(im, probe, path)
+        if fmt == "BMP" and im.tile and im.tile[0][0] == "raw":
+            # Pillow's raw decoder does not need the last row's padding, so a file cut
+            # there would be read: the rows, padding included, must all be in the file
+            end = im.tile[0][2] + im.tile[0][3][1] * im.size[1]
+            if end > size:
+                raise _error(path, f"truncated BMP file (its pixel data would end at byte {end:,}, "
+                                   f"the file has {size:,} bytes)")
+        return probe
 
 
 # PNG ---------------------------------------------------------------------------------------
 
-_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
-_PNG_DEPTHS = {0: (1, 2, 4, 8, 16), 2: (8, 16), 3: (1, 2, 4, 8), 4: (8, 16), 6: (8, 16)}
-_PNG_FILE_CHANNELS = {0: 1, 2: 3, 3: 1, 4: 2, 6: 4}
-_PNG_ADAM7 = ((0, 0, 8, 8), (4, 0, 8, 8), (0, 4, 4, 8), (2, 0, 4, 4), (0, 2, 2, 4), (1, 0, 2, 2), (0, 1, 1, 2))
+_PNG_SAMPLES = {0: 1, 2: 3, 3: 1, 4: 2, 6: 4}  # colour type -> samples a pixel in the file
+_ADAM7 = ((0, 0, 8, 8), (4, 0, 8, 8), (0, 4, 4, 8), (2, 0, 4, 4), (0, 2, 2, 4), (1, 0, 2, 2), (0, 1, 1, 2))
 
 
 def png_raw_size(width: int, height: int, bits_per_pixel: int, interlaced: bool) -> int:
-    """Bytes of filtered scanlines (one filter byte per row) a PNG image must decompress to."""
+    """Bytes of filtered scanlines (one filter byte a row) a PNG's pixel data inflates to."""
 
     def rows(w: int, h: int) -> int:
         return 0 if w <= 0 or h <= 0 else h * (1 + (w * bits_per_pixel + 7) // 8)
 
     if not interlaced:
         return rows(width, height)
-    return sum(
-        rows((width - x0 + dx - 1) // dx, (height - y0 + dy - 1) // dy) for x0, y0, dx, dy in _PNG_ADAM7
-    )
+    return sum(rows((width - x0 + dx - 1) // dx, (height - y0 + dy - 1) // dy) for x0, y0, dx, dy in _ADAM7)
 
 
-def _probe_png(src: _Source) -> _Probe:
-    length, ctype = src.unpack(">I4s", 8, "the IHDR chunk")
-    if ctype != b"IHDR" or length != 13:
-        raise src.fail("corrupt PNG file (the first chunk is not a 13-byte IHDR)")
-    body = src.read(16, 13, "the IHDR chunk")
-    (crc,) = src.unpack(">I", 29, "the IHDR chunk")
-    if zlib.crc32(b"IHDR" + body) != crc:
-        raise src.fail("corrupt PNG file (IHDR checksum mismatch)")
-    width, height, depth, colour, compression, filtering, interlace = struct.unpack(">IIBBBBB", body)
-    _check_side(src, width, height)
-    if colour not in _PNG_DEPTHS:
-        raise src.fail(f"corrupt PNG file (unknown colour type {colour})")
-    if depth not in _PNG_DEPTHS[colour]:
-        raise src.fail(f"corrupt PNG file (bit depth {depth} is not allowed for colour type {colour})")
-    if compression != 0 or filtering != 0 or interlace not in (0, 1):
-        raise src.fail("corrupt PNG file (unknown compression, filter or interlace method)")
-    # walk the chunks up to IEND: every length checked against the file's length
-    pos, idat, has_plte, has_trns = 33, [], False, False
-    while True:
-        length, ctype = src.unpack(">I4s", pos, "a chunk header (the file has no IEND chunk)")
-        if length > 2**31 - 1 or not all(65 <= c <= 90 or 97 <= c <= 122 for c in ctype):
-            raise src.fail(f"corrupt PNG file (bad chunk at byte {pos})")
-        end = pos + 12 + length
-        if end > src.size:
-            raise src.truncated(f"chunk {ctype.decode()} at byte {pos}", end)
-        if ctype == b"IDAT":
-            idat.append((pos + 8, length))
-        elif ctype == b"PLTE":
-            has_plte = True
-        elif ctype == b"tRNS":
-            has_trns = True
-        elif ctype == b"IEND":
-            break
-        pos = end
-    if not idat:
-        raise src.fail("corrupt PNG file (no IDAT chunk: no pixel data)")
-    if colour == 3 and not has_plte:
-        raise src.fail("corrupt PNG file (a palette image without a PLTE chunk)")
-    channels = {0: 1, 2: 3, 3: 4 if has_trns else 3, 4: 2, 6: 4}[colour]
-    header = ImageHeader(width, height, channels, depth, "PNG")
-    info = {
-        "colour_type": colour,
-        "idat": tuple(idat),
-        "raw_size": png_raw_size(width, height, depth * _PNG_FILE_CHANNELS[colour], bool(interlace)),
+def _probe_png(im, fh: BinaryIO, probe: _Probe, path) -> _Probe:
+    """Add what Pillow does not expose, from the IHDR chunk at bytes 12-28: the bit depth
+    (a 16-bit colour PNG goes to pypng, which keeps 16 bits) and the exact size of the
+    inflated pixel data, with the offset of the first IDAT chunk (for the decoder's guard)."""
+    fh.seek(12)
+    ihdr = fh.read(17)
+    if len(ihdr) != 17 or ihdr[:4] != b"IHDR":
+        raise _error(path, "corrupt PNG file (the first chunk is not IHDR)")
+    width, height, depth, colour, _, _, interlace = struct.unpack(">IIBBBBB", ihdr[4:])
+    if (width, height) != im.size or colour not in _PNG_SAMPLES or not im.tile:
+        raise _error(path, "corrupt PNG file (inconsistent IHDR chunk)")
+    details = {
+        "first_idat": im.tile[0][2],
+        "raw_size": png_raw_size(width, height, depth * _PNG_SAMPLES[colour], interlace == 1),
     }
-    return _Probe(header, info)
+    decoder = "pypng" if depth == 16 and colour in (2, 4, 6) else "pillow"
+    header = replace(probe.header, bit_depth=depth)
+    return replace(probe, header=header, decoder=decoder, details=details)
 
 
-# PNM ---------------------------------------------------------------------------------------
-
-_WHITESPACE = frozenset(b" \t\n\r\v\f")
+# TIFF --------------------------------------------------------------------------------------
 
 
-def _probe_pnm(src: _Source) -> _Probe:
-    kind = int(chr(src.read(1, 1, "the magic number")[0]))
-    head = src.read(0, min(src.size, _MAX_PNM_HEADER), "the header")
-    names = ("width", "height") if kind in (1, 4) else ("width", "height", "maxval")
-    values: list[int] = []
-    pos = 2
-    for name in names:
-        while pos < len(head):  # whitespace and comments
-            if head[pos] in _WHITESPACE:
-                pos += 1
-            elif head[pos] == 0x23:  # '#': a comment up to the end of the line
-                ends = [i for i in (head.find(b"\n", pos), head.find(b"\r", pos)) if i >= 0]
-                pos = min(ends) + 1 if ends else len(head)
-            else:
-                break
-        if pos >= len(head):
-            if len(head) < src.size:
-                raise src.fail(f"PNM header longer than {_MAX_PNM_HEADER // 1024} KiB")
-            raise src.fail(f"truncated PNM file (it ends before the {name} in its header)")
-        start = pos
-        while pos < len(head) and 0x30 <= head[pos] <= 0x39 and pos - start <= 12:
-            pos += 1
-        if pos == start:
-            raise src.fail(f"corrupt PNM header (expected the {name} at byte {pos}, found {head[pos:pos + 1]!r})")
-        if pos - start > 12:
-            raise src.fail(f"corrupt PNM header (the {name} has too many digits)")
-        values.append(int(head[start:pos]))
-    if pos >= src.size:
-        raise src.fail("truncated PNM file (it ends after its header, without pixel data)")
-    if pos >= len(head) or head[pos] not in _WHITESPACE:
-        raise src.fail(f"corrupt PNM header (byte {pos} should be whitespace after the {names[-1]})")
-    width, height = values[0], values[1]
-    _check_side(src, width, height)
-    maxval = values[2] if len(values) == 3 else 1
-    if not 1 <= maxval <= 65535:
-        raise src.fail(f"the PNM header declares maxval {maxval}; it must be between 1 and 65535")
-    channels = 3 if kind in (3, 6) else 1
-    offset = pos + 1
-    samples = width * height * channels
-    left = src.size - offset
-    if kind in (5, 6):
-        need = samples * (1 if maxval < 256 else 2)
-    elif kind == 4:
-        need = (width + 7) // 8 * height
-    elif kind == 1:
-        need = samples  # one character a pixel at least
-    else:
-        need = 2 * samples - 1  # a digit and a separator a sample at least
-    if need > left:
-        raise src.fail(
-            f"truncated PNM file (its header declares {width}x{height}, which needs "
-            f"{need:,} bytes of pixel data; the file holds {max(left, 0):,})"
-        )
-    header = ImageHeader(width, height, channels, maxval.bit_length(), "PNM")
-    return _Probe(header, {"kind": kind, "maxval": maxval, "offset": offset})
+def _probe_tiff(im, probe: _Probe, path) -> _Probe:
+    """The bit depth from the BitsPerSample tag; a 16-bit colour TIFF, which Pillow would
+    cut to 8 bits (mode RGB or RGBA), goes to tifffile."""
+    bits = max(im.tag_v2.get(258) or (1,))
+    decoder = "tifffile" if bits > 8 and not im.mode.startswith(("I", "F")) else "pillow"
+    if decoder == "pillow" and im.tile and im.tile[0][0] == "raw":
+        # Pillow's raw decoder leaves the rows of missing strips blank, so a small file
+        # that declares a tall image would be read, slowly, as a black one
+        covered = sum((x1 - x0) * (y1 - y0) for _, (x0, y0, x1, y1), *_ in im.tile)
+        if covered < probe.header.pixels:
+            raise _error(path, f"truncated TIFF file (its strips hold {covered:,} of the "
+                               f"{probe.header.pixels:,} pixels its header declares)")
+    return replace(probe, header=replace(probe.header, bit_depth=bits), decoder=decoder)
 
 
-# BMP ---------------------------------------------------------------------------------------
+def _probe_tifffile(path: str | os.PathLike, pillow_error: ImageReadError) -> _Probe:
+    """The first page's header as tifffile reads it, for a TIFF Pillow has no mode for
+    (16-bit grey + alpha, float RGB, 64-bit float); ``pillow_error`` if tifffile fails too."""
+    import tifffile
 
-
-def _probe_bmp(src: _Source) -> _Probe:
-    (offset,) = src.unpack("<I", 10, "the file header")
-    (dib,) = src.unpack("<I", 14, "the file header")
-    if dib == 12:
-        width, height, _, bpp = src.unpack("<HHHH", 18, "the BMP header")
-        compression = 0
-    elif dib in (16, 40, 52, 56, 64, 108, 124):
-        if dib == 16:
-            width, height, _, bpp = src.unpack("<iiHH", 18, "the BMP header")
-            compression = 0
-        else:
-            width, height, _, bpp, compression = src.unpack("<iiHHI", 18, "the BMP header")
-    else:
-        raise src.fail(f"corrupt or unsupported BMP file (header size {dib})")
-    height = abs(height)  # negative: stored top-down
-    _check_side(src, width, height)
-    if bpp not in (1, 2, 4, 8, 16, 24, 32):
-        raise src.fail(f"corrupt BMP file ({bpp} bits per pixel)")
-    if compression not in (0, 1, 2, 3, 6):
-        raise src.fail(f"unsupported BMP compression {compression} (texsyn reads raw, RLE and bit-field BMP)")
-    if compression in (0, 3, 6):
-        end = offset + (bpp * width + 31) // 32 * 4 * height
-        if end > src.size:
-            raise src.truncated(f"the {width}x{height} pixel data", end)
-    elif offset >= src.size:
-        raise src.truncated("the pixel data", offset + 1)
-    channels = 4 if bpp == 32 and compression in (3, 6) else 3
-    return _Probe(ImageHeader(width, height, channels, min(bpp, 8), "BMP"), {})
-
-
-# GIF ---------------------------------------------------------------------------------------
-
-
-def _skip_sub_blocks(src: _Source, pos: int, what: str) -> int:
-    while True:
-        (n,) = src.unpack("B", pos, what)
-        pos += 1 + n
-        if n == 0:
-            return pos
-
-
-def _probe_gif(src: _Source) -> _Probe:
-    width, height, packed = src.unpack("<HHB", 6, "the screen descriptor")
-    _check_side(src, width, height)
-    pos = 13 + (3 * 2 ** ((packed & 7) + 1) if packed & 0x80 else 0)
-    transparent = False
-    while True:
-        (block,) = src.unpack("B", pos, "the first image")
-        if block == 0x21:  # extension: label, then sub-blocks
-            (label,) = src.unpack("B", pos + 1, "an extension block")
-            if label == 0xF9:
-                size, flags = src.unpack("BB", pos + 2, "a graphic control extension")
-                transparent = size >= 1 and bool(flags & 1)
-            pos = _skip_sub_blocks(src, pos + 2, "an extension block")
-        elif block == 0x2C:  # the first image: descriptor, colour table, LZW data
-            (local,) = src.unpack("B", pos + 9, "the image descriptor")
-            pos += 10 + (3 * 2 ** ((local & 7) + 1) if local & 0x80 else 0)
-            src.read(pos, 1, "the image data")
-            _skip_sub_blocks(src, pos + 1, "the image data")
-            break
-        elif block == 0x3B:
-            raise src.fail("corrupt GIF file (it holds no image)")
-        else:
-            raise src.fail(f"corrupt GIF file (unknown block 0x{block:02x} at byte {pos})")
-    return _Probe(ImageHeader(width, height, 4 if transparent else 3, 8, "GIF"), {})
+    try:
+        with tifffile.TiffFile(path) as tif:
+            page = tif.pages.first
+            width, height = int(page.imagewidth), int(page.imagelength)
+            samples, bits, kind = int(page.samplesperpixel), int(page.bitspersample), int(page.sampleformat)
+    except Exception:  # tifffile cannot read it either: Pillow's complaint is the one to show
+        raise pillow_error from None
+    if samples > 4 or (kind, bits) not in ((1, 8), (1, 16), (3, 32), (3, 64)):
+        raise _error(path, f"unsupported TIFF file ({samples} samples of {bits} bits, sample format {kind})")
+    return _Probe(ImageHeader(width, height, samples, bits, "TIFF"), "tifffile")
 
 
 # WebP --------------------------------------------------------------------------------------
 
 
-def _probe_webp(src: _Source) -> _Probe:
-    (riff_size,) = src.unpack("<I", 4, "the RIFF header")
-    if riff_size + 8 > src.size:
-        raise src.truncated("the RIFF container", riff_size + 8)
-    fourcc = src.read(12, 4, "the first chunk")
-    if fourcc == b"VP8 ":
-        start, width, height = src.unpack("<3sHH", 23, "the VP8 frame header")
-        if start != b"\x9d\x01\x2a":
-            raise src.fail("corrupt WebP file (bad VP8 start code)")
-        width, height, channels = width & 0x3FFF, height & 0x3FFF, 3
-    elif fourcc == b"VP8L":
-        signature, bits = src.unpack("<BI", 20, "the VP8L header")
-        if signature != 0x2F:
-            raise src.fail("corrupt WebP file (bad VP8L signature)")
-        width, height = (bits & 0x3FFF) + 1, ((bits >> 14) & 0x3FFF) + 1
+def _probe_webp(fh: BinaryIO, path) -> _Probe:
+    """The canvas size from the first 30 bytes (as Pillow's own ``_get_size`` reads it):
+    Pillow's WebP open reads the whole file and creates libwebp's decoder, which allocates
+    the canvas, so it must wait for the budget check."""
+    fh.seek(0)
+    s = fh.read(30)
+    chunk = s[12:16]
+    if chunk == b"VP8 " and len(s) >= 30 and s[23:26] == b"\x9d\x01\x2a":
+        width, height = (int.from_bytes(s[i : i + 2], "little") & 0x3FFF for i in (26, 28))
+        channels = 3
+    elif chunk == b"VP8L" and len(s) >= 25 and s[20] == 0x2F:
+        bits = int.from_bytes(s[21:25], "little")
+        width, height = (bits & 0x3FFF) + 1, (bits >> 14 & 0x3FFF) + 1
         channels = 4 if bits >> 28 & 1 else 3
-    elif fourcc == b"VP8X":
-        (flags,) = src.unpack("B", 20, "the VP8X header")
-        raw = src.read(24, 6, "the VP8X header")
-        width = int.from_bytes(raw[:3], "little") + 1
-        height = int.from_bytes(raw[3:], "little") + 1
-        channels = 4 if flags & 0x10 else 3
+    elif chunk == b"VP8X" and len(s) >= 30:
+        width, height = (int.from_bytes(s[i : i + 3], "little") + 1 for i in (24, 27))
+        channels = 4 if s[20] & 0x10 else 3
     else:
-        raise src.fail(f"corrupt WebP file (unknown first chunk {fourcc!r})")
-    _check_side(src, width, height)
-    return _Probe(ImageHeader(width, height, channels, 8, "WEBP"), {})
+        raise _error(path, "truncated or corrupt WebP file (no VP8, VP8L or VP8X header)")
+    return _Probe(ImageHeader(width, height, channels, 8, "WEBP"))
 
 
-# JPEG --------------------------------------------------------------------------------------
+# PNM (PBM, PGM, PPM) -----------------------------------------------------------------------
 
-_JPEG_SOF = frozenset(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}
-
-
-def _probe_jpeg(src: _Source) -> _Probe:
-    pos = 2
-    while True:
-        (byte,) = src.unpack("B", pos, "a marker (no frame header found)")
-        if byte != 0xFF:
-            raise src.fail(f"corrupt JPEG file (expected a marker at byte {pos})")
-        while byte == 0xFF:  # fill bytes
-            pos += 1
-            (byte,) = src.unpack("B", pos, "a marker (no frame header found)")
-        marker, pos = byte, pos + 1
-        if marker in (0x01, 0xD8) or 0xD0 <= marker <= 0xD7:
-            continue  # markers without a length
-        if marker in (0xD9, 0xDA):
-            raise src.fail("corrupt JPEG file (image data before a frame header)")
-        (length,) = src.unpack(">H", pos, "a segment length")
-        if length < 2:
-            raise src.fail(f"corrupt JPEG file (segment length {length} at byte {pos})")
-        if marker in _JPEG_SOF:
-            precision, height, width, components = src.unpack(">BHHB", pos + 2, "the frame header")
-            if length < 8 + 3 * components:
-                raise src.fail("corrupt JPEG file (short frame header)")
-            if components not in (1, 3, 4):
-                raise src.fail(f"unsupported JPEG file ({components} colour components)")
-            if height == 0:
-                raise src.fail("unsupported JPEG file (height defined after the scan, DNL)")
-            _check_side(src, width, height)
-            if pos + length > src.size:
-                raise src.truncated("the frame header", pos + length)
-            channels = 1 if components == 1 else 3  # CMYK/YCCK become RGB
-            return _Probe(ImageHeader(width, height, channels, precision, "JPEG"), {})
-        pos += length
-        if pos > src.size:
-            raise src.truncated(f"segment 0x{marker:02x}", pos)
+_PNM_MAGIC = re.compile(rb"P[1-6](?:[ \t\n\r\v\f#]|\Z)")
+#: A header field: whitespace and comments (``#`` to the end of the line), then digits.
+_PNM_FIELD = re.compile(rb"(?:[ \t\n\r\v\f]|#[^\n\r]*(?:[\n\r]|\Z))*(\d*)")
 
 
-# TIFF --------------------------------------------------------------------------------------
-
-_TIFF_TYPE_SIZES = {1: 1, 2: 1, 3: 2, 4: 4, 5: 8, 6: 1, 7: 1, 8: 2, 9: 4, 10: 8, 11: 4, 12: 8, 13: 4, 16: 8, 17: 8, 18: 8}
-_TIFF_INT_TYPES = {1: "B", 3: "H", 4: "I", 6: "b", 8: "h", 9: "i", 13: "I", 16: "Q", 17: "q", 18: "Q"}
-_TIFF_WANTED = {256, 257, 258, 259, 262, 273, 277, 278, 279, 284, 322, 323, 324, 325, 338, 339}
-_TIFF_PHOTOMETRIC = {0: "min-is-white", 1: "min-is-black", 2: "RGB", 3: "palette", 5: "CMYK", 6: "YCbCr"}
-
-
-def _probe_tiff(src: _Source) -> _Probe:
-    order = "<" if src.read(0, 2, "the byte order") == b"II" else ">"
-    (version,) = src.unpack(order + "H", 2, "the TIFF header")
-    if version == 42:
-        (ifd,) = src.unpack(order + "I", 4, "the TIFF header")
-        count_fmt, entry_fmt, entry_size, inline = "H", "HHI4s", 12, 4
-    elif version == 43:
-        offset_size, _, ifd = src.unpack(order + "HHQ", 4, "the BigTIFF header")
-        if offset_size != 8:
-            raise src.fail("corrupt BigTIFF file (offset size is not 8)")
-        count_fmt, entry_fmt, entry_size, inline = "Q", "HHQ8s", 20, 8
-    else:
-        raise src.fail(f"corrupt TIFF file (version {version})")
-    if ifd < 8 or ifd >= src.size:
-        raise src.truncated("the first image directory", ifd + 2)
-    (n,) = src.unpack(order + count_fmt, ifd, "the first image directory")
-    if n == 0 or n > _MAX_TIFF_ENTRIES:
-        raise src.fail(f"corrupt TIFF file (image directory with {n} entries)")
-    start = ifd + struct.calcsize(count_fmt)
-    table = src.read(start, n * entry_size, "the first image directory")
-    tags: dict[int, tuple[int, ...]] = {}
-    for i in range(n):
-        tag, typ, count, field = struct.unpack(order + entry_fmt, table[i * entry_size : (i + 1) * entry_size])
-        size = _TIFF_TYPE_SIZES.get(typ)
-        if size is None:
-            continue  # unknown type: readers skip it
-        nbytes = size * count
-        if nbytes > inline:
-            (where,) = struct.unpack(order + ("I" if inline == 4 else "Q"), field)
-            if where + nbytes > src.size:
-                raise src.truncated(f"the data of TIFF tag {tag}", where + nbytes)
-        if tag not in _TIFF_WANTED:
-            continue
-        if typ not in _TIFF_INT_TYPES:
-            raise src.fail(f"corrupt TIFF file (tag {tag} has type {typ})")
-        data = field[:nbytes] if nbytes <= inline else src.read(where, nbytes, f"TIFF tag {tag}")
-        tags[tag] = struct.unpack(f"{order}{count}{_TIFF_INT_TYPES[typ]}", data)
-
-    def one(tag: int, default: int | None = None) -> int:
-        values = tags.get(tag)
-        if not values:
-            if default is None:
-                raise src.fail(f"corrupt TIFF file (required tag {tag} is missing)")
-            return default
-        return int(values[0])
-
-    width, height = one(256), one(257)
-    _check_side(src, width, height)
-    spp = one(277, 1)
-    depths = set(tags.get(258) or (1,))
-    if len(depths) != 1:
-        raise src.fail(f"unsupported TIFF file (different bit depths per sample: {sorted(depths)[:4]})")
-    bps = depths.pop()
-    if spp < 1 or spp > 16 or bps not in (1, 2, 4, 8, 16, 32, 64):
-        raise src.fail(f"unsupported TIFF file ({spp} samples of {bps} bits per pixel)")
-    compression = one(259, 1)
-    photometric = one(262, 2 if spp >= 3 else 1)
-    sample_format = one(339, 1)
-    planar = one(284, 1)
-    if photometric not in _TIFF_PHOTOMETRIC:
-        raise src.fail(f"unsupported TIFF colour model (photometric {photometric})")
-    base = {0: 1, 1: 1, 2: 3, 3: 1, 5: 4, 6: 3}[photometric]
-    if spp < base or spp > base + 1 or (spp == base + 1 and photometric in (3, 5, 6)):
-        raise src.fail(f"unsupported TIFF layout ({spp} samples in a {_TIFF_PHOTOMETRIC[photometric]} image)")
-    if sample_format not in (1, 3) or (sample_format == 3 and bps not in (32, 64)):
-        raise src.fail(f"unsupported TIFF sample format {sample_format} with {bps} bits")
-    tiled = 324 in tags or 322 in tags
-    offsets = tags.get(324 if tiled else 273)
-    counts = tags.get(325 if tiled else 279)
-    if not offsets:
-        raise src.fail("corrupt TIFF file (no strip or tile offsets)")
-    row_bytes = (width * (spp if planar == 1 else 1) * bps + 7) // 8
-    least = row_bytes * height * (1 if planar == 1 else spp)  # uncompressed pixel data, at least
-    if counts is None:
-        if compression != 1 or len(offsets) != 1:
-            raise src.fail("corrupt TIFF file (no strip byte counts)")
-        counts = (least,)
-    if len(counts) != len(offsets):
-        raise src.fail("corrupt TIFF file (strip offsets and byte counts differ in number)")
-    for offset, count in zip(offsets, counts):
-        if count and offset + count > src.size:
-            raise src.truncated("the pixel data", offset + count)
-    if compression == 1 and photometric != 6 and sum(counts) < least:
-        raise src.fail(
-            f"truncated TIFF file (its header declares {width}x{height}, which needs "
-            f"{least:,} bytes of pixel data; the strips hold {sum(counts):,})"
-        )
-    channels = 3 if photometric in (3, 5, 6) else spp
-    header = ImageHeader(width, height, channels, bps, "TIFF")
-    info = {
-        "photometric": photometric,
-        "compression": compression,
-        "samples": spp,
-        "sample_format": sample_format,
-        "planar": planar,
-        "segments": tuple(zip(offsets, counts)),
-        "least": least,
-    }
-    return _Probe(header, info)
-
-
-_SIGNATURES = (
-    (_PNG_SIGNATURE, "PNG", _probe_png),
-    (b"\xff\xd8\xff", "JPEG", _probe_jpeg),
-    (b"II*\x00", "TIFF", _probe_tiff),
-    (b"MM\x00*", "TIFF", _probe_tiff),
-    (b"II+\x00", "TIFF", _probe_tiff),
-    (b"MM\x00+", "TIFF", _probe_tiff),
-    (b"GIF87a", "GIF", _probe_gif),
-    (b"GIF89a", "GIF", _probe_gif),
-    (b"RIFF", "WEBP", _probe_webp),
-    (b"BM", "BMP", _probe_bmp),
-)
+def _probe_pnm(fh: BinaryIO, size: int, path) -> _Probe:
+    """The PNM header's tokens, read here rather than by Pillow so that a message names the
+    field that is missing or out of range, and so that a file too short for the size it
+    declares is called truncated (before the budget, which it may also exceed)."""
+    fh.seek(0)
+    head = fh.read(_MAX_PNM_HEADER)
+    kind = head[1] - 0x30
+    names = ("width", "height") if kind in (1, 4) else ("width", "height", "maxval")
+    values, pos = [], 2
+    for name in names:
+        match = _PNM_FIELD.match(head, pos)
+        pos = match.end()
+        if not match[1]:
+            if pos < len(head):
+                raise _error(path, f"corrupt PNM header (expected the {name} at byte {pos}, found {head[pos:pos + 1]!r})")
+            if len(head) < size:
+                raise _error(path, f"PNM header longer than {_MAX_PNM_HEADER // 1024} KiB")
+            raise _error(path, f"truncated PNM file (it ends before the {name} in its header)")
+        if len(match[1]) > 12:
+            raise _error(path, f"corrupt PNM header (the {name} has too many digits)")
+        values.append(int(match[1]))
+    if pos >= size:
+        raise _error(path, "truncated PNM file (it ends after its header, without pixel data)")
+    if head[pos] not in b" \t\n\r\v\f":
+        raise _error(path, f"corrupt PNM header (byte {pos} should be whitespace after the {names[-1]})")
+    width, height, maxval = values[0], values[1], values[2] if kind not in (1, 4) else 1
+    if width < 1 or height < 1:
+        raise _error(path, f"the PNM header declares an impossible size {width}x{height}")
+    if not 1 <= maxval <= 65535:
+        raise _error(path, f"the PNM header declares maxval {maxval}; it must be between 1 and 65535")
+    channels = 3 if kind in (3, 6) else 1
+    offset, samples = pos + 1, width * height * channels
+    # the least pixel data the header implies: raw samples, raw bits, or one character a
+    # plain PBM pixel and a digit plus a separator a plain PGM/PPM sample
+    need = {1: samples, 2: 2 * samples - 1, 3: 2 * samples - 1, 4: (width + 7) // 8 * height}.get(
+        kind, samples * (1 if maxval < 256 else 2)
+    )
+    if need > size - offset:
+        raise _error(path, f"truncated PNM file (its header declares {width}x{height}, which needs "
+                           f"{need:,} bytes of pixel data; the file holds {max(size - offset, 0):,})")
+    # Pillow's raw PGM/PPM decoder for a maxval other than 255 converts a sample at a time
+    # in Python and rescales it: those are read by numpy instead
+    decoder = "numpy" if kind in (5, 6) and maxval != 255 else "pillow"
+    header = ImageHeader(width, height, channels, maxval.bit_length(), "PNM")
+    return _Probe(header, decoder, details={"kind": kind, "maxval": maxval, "offset": offset})

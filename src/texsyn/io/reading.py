@@ -6,13 +6,15 @@ PPM, plain and raw, maxval up to 65535).
 
 Every read follows the same steps (``docs/reading.md``):
 
-1. the header is parsed by :mod:`texsyn.io.headers` without decoding pixels;
+1. the header is read by :mod:`texsyn.io.headers` (Pillow's lazy open) without decoding;
 2. the declared size is checked against the pixel budget (``TEXSYN_MAX_PIXELS``) and its
    memory equivalent, so that a decompression bomb is refused before any allocation;
-3. the pixels are decoded by a decoder whose work is bounded by the declared size (Pillow,
-   pypng for 16-bit colour PNG, tifffile for 16-bit colour and float TIFF, texsyn's own
-   PNM decoder); compressed data is first checked to decompress to exactly the declared
-   size, in bounded pieces;
+3. the pixels are decoded into at most the declared size: by Pillow; by pypng for 16-bit
+   colour PNG and by tifffile for 16-bit colour and float TIFF (Pillow would cut them to
+   8 bits, or has no mode for them); by numpy for raw PGM/PPM whose maxval is not 255.
+   Two guards cover what those decoders do not: a PNG's compressed data must inflate to
+   exactly the size its header declares, and a TIFF strip given to tifffile must not
+   inflate past it, both checked in bounded pieces;
 4. any failure of a decoder becomes one :class:`~texsyn.errors.ImageReadError` that names
    the file and the problem.
 """
@@ -26,18 +28,23 @@ import sys
 import threading
 import warnings
 import zlib
+from collections.abc import Iterable, Iterator
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 
-from ..errors import ImageTooLargeError, InputError
+from ..errors import InputError
 from .headers import (
     ImageHeader,
     _error,
     _open_checked,
+    _pillow_open,
+    _pillow_target,
     _Probe,
     _probe,
-    _show,
+    _quiet_library_logs,
+    _said,
     check_image_size,
     max_image_pixels,
 )
@@ -45,14 +52,10 @@ from .headers import (
 __all__ = ["READ_FORMATS", "read_image"]
 
 READ_FORMATS = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".gif", ".webp", ".pgm", ".ppm", ".pnm", ".pbm")
-_READ_NAMES = "PNG, JPEG, TIFF, BMP, GIF, WebP, PBM/PGM/PPM"
 
-#: Compressed data is read and checked in pieces of this size.
+#: Compressed data is inflated, counted and dropped in pieces of this size.
 _PIECE = 1 << 20
-#: A plain (ASCII) PNM raster is parsed in blocks of this many characters.
-_PLAIN_BLOCK = 4 << 20
 
-_PIL_LOCK = threading.Lock()
 _STDERR_LOCK = threading.RLock()
 
 
@@ -91,81 +94,54 @@ def read_image(path: str | os.PathLike, *, keep_alpha: bool = False) -> np.ndarr
         ``TEXSYN_MAX_PIXELS`` holds a value that is not a positive number of pixels.
     """
     probe = _probe(path)
-    budget = max_image_pixels()
-    check_image_size(probe.header, path, max_pixels=budget)
+    check_image_size(probe.header, path, max_pixels=max_image_pixels())
     try:
-        data, scale = _decode(path, probe, budget)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # decoders' warnings (EXIF, palettes) are not the user's concern
+            data, scale = _decode(path, probe)
     except InputError:
         raise
     except MemoryError:
         raise _error(path, "not enough memory to decode it (lower TEXSYN_MAX_PIXELS)") from None
     except Exception as exc:  # every decoder failure, whatever its type, is an ImageReadError
-        raise _error(path, _reason(exc, probe.header.format, path)) from None
+        raise _error(path, _complaint(exc, probe, path)) from None
     return _to_float(data, scale, path, keep_alpha)
 
 
-def _reason(exc: BaseException, fmt: str, path: str | os.PathLike) -> str:
-    """A decoder's complaint, short and without the path (the message names it once)."""
-    text = str(exc)
-    for name in {os.fspath(path), str(Path(path)), Path(path).name} - {""}:
-        text = text.replace(repr(name), "it").replace(name, "it")
-    text = " ".join(text.split()) or type(exc).__name__
-    return f"corrupt or unsupported {fmt} file ({text[:90]})"
-
-
-def _decode(path: str | os.PathLike, probe: _Probe, budget: int) -> tuple[np.ndarray, float]:
-    """Decode the pixels: an integer, bool or float array and the value that means 1.0."""
-    header, info = probe.header, probe.info
-    if header.format == "PNM":
-        return _decode_pnm(path, probe)
-    if header.format == "PNG":
-        _check_png_data(path, info)
-        if header.bit_depth == 16 and info["colour_type"] != 0:
-            return _decode_png16(path, header), 65535.0
-    if header.format == "TIFF" and not _pillow_reads_tiff(header, info):
-        return _decode_tifffile(path, probe)
-    return _decode_pillow(path, header, budget)
-
-
-# --------------------------------------------------------------------------- Pillow
-
-_PIL_TARGETS = {
-    "1": "1", "L": "L", "LA": "LA", "RGB": "RGB", "RGBA": "RGBA", "I": "I", "F": "F",
-    "I;16": "I;16", "I;16L": "I;16L", "I;16B": "I;16B", "I;16N": "I;16N",
-    "PA": "RGBA", "La": "LA", "RGBa": "RGBA", "RGBX": "RGB",
-    "CMYK": "RGB", "YCbCr": "RGB", "LAB": "RGB", "HSV": "RGB",
+#: What Pillow's plain PNM decoder says -> the same problem in texsyn's PNM messages.
+_PNM_COMPLAINTS = {
+    "too large for this mode": "corrupt PNM file (a sample exceeds its maxval {maxval}: {said})",
+    "invalid literal for int": "corrupt PNM file (unexpected character in the pixel data: {said})",
+    "Invalid token": "corrupt PNM file (unexpected character in the pixel data: {said})",
+    "not enough image data": "truncated PNM file (it holds fewer samples than its header declares)",
 }
 
 
-def _decode_pillow(path: str | os.PathLike, header: ImageHeader, budget: int) -> tuple[np.ndarray, float]:
-    from PIL import Image
+def _complaint(exc: BaseException, probe: _Probe, path: str | os.PathLike) -> str:
+    said, fmt = _said(exc, path), probe.header.format
+    for words, ours in _PNM_COMPLAINTS.items() if fmt == "PNM" else ():
+        if words in said:
+            return ours.format(maxval=probe.details["maxval"], said=said)
+    return f"corrupt or unsupported {fmt} file ({said})"
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # Pillow's warnings (EXIF, palettes) are not the user's concern
-        quiet = _silent_stderr if header.format == "TIFF" else contextlib.nullcontext
-        with quiet():
-            im = _pillow_open(path, header.format, budget)
-        with im, quiet():
-            if im.size != (header.width, header.height):
-                raise _error(path, f"the {header.format} decoder sees size {im.size[0]}x{im.size[1]}, "
-                                   f"the header declares {header.width}x{header.height}")
-            mode = im.mode
-            target = _PIL_TARGETS.get(mode)
-            if mode == "P":
-                target = "RGBA" if "transparency" in im.info else "RGB"
-            if target is None:
-                raise _error(path, f"unsupported {header.format} pixel mode {mode}")
-            bits = 16 if target.startswith("I;16") else 32 if target in ("I", "F") else 8
-            decoded = ImageHeader(header.width, header.height, Image.getmodebands(target), bits, header.format)
-            check_image_size(decoded, path, max_pixels=budget)
-            im.load()
-            if target != mode:
-                converted = im.convert(target)
-                im.close()
-                im = converted
-            arr = np.asarray(im)
-    if arr.dtype == np.uint8 or arr.dtype == bool:
-        return arr, 255.0 if arr.dtype == np.uint8 else 1.0
+
+def _decode(path: str | os.PathLike, probe: _Probe) -> tuple[np.ndarray, float]:
+    """Decode the pixels: an integer, bool or float array and the value that means 1.0."""
+    if probe.header.format == "PNG":
+        _check_png(path, probe)
+    if probe.decoder == "pypng":
+        return _decode_png16(path, probe.header), 65535.0
+    if probe.decoder == "tifffile":
+        return _decode_tifffile(path, probe.header)
+    if probe.decoder == "numpy":
+        return _decode_raw_pnm(path, probe)
+    arr = _decode_pillow(path, probe)
+    if probe.header.format == "PNM" and arr.dtype != bool:
+        return _undo_pnm_rescale(arr, probe.details["maxval"])
+    if arr.dtype == bool:
+        return arr, 1.0
+    if arr.dtype == np.uint8:
+        return arr, 255.0
     if arr.dtype.kind == "u" and arr.dtype.itemsize == 2:
         return arr, 65535.0
     if arr.dtype.kind == "i":  # 32-bit integer images: read as 16-bit data
@@ -175,17 +151,42 @@ def _decode_pillow(path: str | os.PathLike, header: ImageHeader, budget: int) ->
     return arr, 1.0
 
 
+# --------------------------------------------------------------------------- Pillow
+
+
+def _decode_pillow(path: str | os.PathLike, probe: _Probe) -> np.ndarray:
+    """Pillow's decode (``load()``), converted to the mode the probe chose, as an array."""
+    header = probe.header
+    fh, _ = _open_checked(path)
+    with fh, _pillow_open(fh, "PPM" if header.format == "PNM" else header.format, path) as im:
+        if im.size != (header.width, header.height) or probe.mode not in (None, im.mode):
+            raise _error(path, "the file changed while it was read")
+        target = probe.target or _pillow_target(im)
+        if not target:
+            raise _error(path, f"unsupported {header.format} pixel mode {im.mode}")
+        libtiff = header.format == "TIFF" and im.tile and im.tile[0][0] == "libtiff"
+        with _libtiff_muted() if libtiff else contextlib.nullcontext():
+            im.load()
+        return np.asarray(im.convert(target) if target != im.mode else im)
+
+
 @contextlib.contextmanager
-def _silent_stderr():
-    """Send file descriptor 2 to the null device: libtiff, under Pillow, prints its warnings
-    about a broken file straight to stderr, which would add lines to the one-line error.
-    Output of other threads during the decode is lost too; the lock keeps our own nested
-    or concurrent uses from restoring the wrong descriptor."""
+def _libtiff_muted():
+    """Point file descriptor 2 at the null device while Pillow's libtiff decoder runs.
+
+    libtiff prints its complaints about a broken TIFF ("Using code not yet in table",
+    "Incorrect count for RowsPerStrip"...) straight to the process's stderr, where they
+    would add lines to texsyn's one-line error. Pillow mutes libtiff's warnings but not its
+    errors and offers no way to redirect them; tifffile cannot take these files over, since
+    without the optional imagecodecs package it decodes neither LZW nor JPEG. Only this
+    decode is muted, but output of other threads during it is lost too; the lock keeps
+    concurrent reads from restoring the wrong descriptor.
+    """
     with _STDERR_LOCK:
         try:
             sys.stderr.flush()
             saved = os.dup(2)
-        except (OSError, ValueError, AttributeError):  # no real stderr: nothing to silence
+        except (OSError, ValueError, AttributeError):  # no real stderr: nothing to mute
             yield
             return
         null = os.open(os.devnull, os.O_WRONLY)
@@ -198,74 +199,72 @@ def _silent_stderr():
             os.close(null)
 
 
-def _pillow_open(path: str | os.PathLike, fmt: str, budget: int):
-    """``Image.open`` restricted to the format the header showed, with Pillow's bomb guard
-    consistent with ours: our budget was checked first, so Pillow must not refuse below it."""
-    from PIL import Image
+# --------------------------------------------------------------------------- bounded inflation
 
-    limit = Image.MAX_IMAGE_PIXELS
-    try:
-        if limit is None or budget <= 2 * limit:
-            return Image.open(path, formats=[fmt])
-        with _PIL_LOCK:  # only when TEXSYN_MAX_PIXELS is set above Pillow's own limit
-            saved, Image.MAX_IMAGE_PIXELS = Image.MAX_IMAGE_PIXELS, budget
-            try:
-                return Image.open(path, formats=[fmt])
-            finally:
-                Image.MAX_IMAGE_PIXELS = saved
-    except Image.DecompressionBombError:
-        raise ImageTooLargeError(
-            f"'{_show(path)}' is larger than Pillow's Image.MAX_IMAGE_PIXELS allows; "
-            "set TEXSYN_MAX_PIXELS to change texsyn's budget"
-        ) from None
+
+def _pieces(fh: BinaryIO, offset: int, length: int, path, fmt: str) -> Iterator[bytes]:
+    """``length`` bytes of ``fh`` from ``offset``, in pieces of at most 1 MiB."""
+    fh.seek(offset)
+    while length > 0:
+        piece = fh.read(min(length, _PIECE))
+        if not piece:
+            raise _error(path, f"truncated {fmt} file (its pixel data ends early)")
+        length -= len(piece)
+        yield piece
+
+
+def _inflated_size(pieces: Iterable[bytes], inflater, limit: int) -> int:
+    """Bytes ``pieces`` inflate to through ``inflater`` (zlib or lzma), counted and dropped a
+    MiB at a time; stops as soon as the count passes ``limit``."""
+    total = 0
+    for piece in pieces:
+        while not inflater.eof:
+            out = inflater.decompress(piece, _PIECE)
+            total += len(out)
+            if total > limit:
+                return total
+            piece = getattr(inflater, "unconsumed_tail", b"")
+            if not piece and len(out) < _PIECE and getattr(inflater, "needs_input", True):
+                break
+    return total
 
 
 # --------------------------------------------------------------------------- PNG
 
+_IEND = b"\0\0\0\0IEND\xaeB`\x82"  # the last chunk of every PNG, checksum included
 
-def _check_png_data(path: str | os.PathLike, info: dict) -> None:
-    """Check that the IDAT chunks decompress to exactly the size the header declares.
 
-    The data is inflated in pieces of at most 1 MiB that are counted and dropped, so that a
-    compressed bomb costs at most the declared size in work and 1 MiB in memory. Each IDAT
-    chunk's checksum is verified on the way.
+def _check_png(path: str | os.PathLike, probe: _Probe) -> None:
+    """Check a PNG's chunks (Pillow's ``verify``: every chunk up to IEND present, checksums
+    right) and that its pixel data inflates to exactly the size its header declares.
+
+    Pillow stops inflating when the image is full and ignores what is left, and pypng
+    inflates each IDAT chunk in one piece (a 1 MB chunk can give 1 GB), so the data is
+    first inflated here a MiB at a time, counted and dropped: a compressed bomb costs at
+    most the declared size in work and 1 MiB in memory.
     """
-    expected = info["raw_size"]
-    inflater = zlib.decompressobj()
-    total = 0
+    expected = probe.details["raw_size"]
     fh, _ = _open_checked(path)
     with fh:
-        for offset, length in info["idat"]:
-            fh.seek(offset - 4)
-            crc = zlib.crc32(fh.read(4))
-            left = length
-            while left:
-                piece = fh.read(min(left, _PIECE))
-                if not piece:
-                    raise _error(path, "truncated PNG file (IDAT data missing)")
-                left -= len(piece)
-                crc = zlib.crc32(piece, crc)
-                while piece and not inflater.eof:
-                    try:
-                        out = inflater.decompress(piece, _PIECE)
-                    except zlib.error as exc:
-                        raise _error(path, f"corrupt PNG file (compressed data: {exc})") from None
-                    total += len(out)
-                    if total > expected:
-                        raise _error(path, f"corrupt PNG file (its pixel data is larger than "
-                                           f"the {expected:,} bytes its header declares)")
-                    piece = inflater.unconsumed_tail
-            if not inflater.eof:
-                try:
-                    total += len(inflater.flush())  # no input left: at most a window of output
-                except zlib.error as exc:
-                    raise _error(path, f"corrupt PNG file (compressed data: {exc})") from None
-            stored = fh.read(4)
-            if len(stored) != 4 or int.from_bytes(stored, "big") != crc:
-                raise _error(path, f"corrupt PNG file (IDAT checksum mismatch at byte {offset - 8})")
+        _pillow_open(fh, "PNG", path).verify()
+        # verify() stops at IEND's type, before its checksum: a file cut in its last four
+        # bytes would pass, so look for the whole IEND chunk where verify() stopped
+        fh.seek(max(fh.tell() - 12, 0))
+        if _IEND not in fh.read(16):
+            raise _error(path, "truncated PNG file (its IEND chunk is incomplete)")
+
+        def idat_pieces() -> Iterator[bytes]:
+            fh.seek(probe.details["first_idat"] - 8)
+            while (head := fh.read(8))[4:] == b"IDAT":
+                yield from _pieces(fh, fh.tell(), int.from_bytes(head[:4], "big"), path, "PNG")
+                fh.seek(4, os.SEEK_CUR)  # the checksum, verified above
+
+        inflater = zlib.decompressobj()
+        total = _inflated_size(idat_pieces(), inflater, expected)
+    if total > expected:
+        raise _error(path, f"corrupt PNG file (its pixel data is larger than the {expected:,} bytes its header declares)")
     if not inflater.eof or total != expected:
-        raise _error(path, f"truncated PNG file (its pixel data holds {total:,} bytes, "
-                           f"its header declares {expected:,})")
+        raise _error(path, f"truncated PNG file (its pixel data holds {total:,} bytes, its header declares {expected:,})")
 
 
 def _decode_png16(path: str | os.PathLike, header: ImageHeader) -> np.ndarray:
@@ -275,54 +274,59 @@ def _decode_png16(path: str | os.PathLike, header: ImageHeader) -> np.ndarray:
     fh, _ = _open_checked(path)
     with fh:
         width, height, rows, meta = png.Reader(file=fh).read()
-        planes = int(meta["planes"])
-        if (width, height) != (header.width, header.height) or meta["bitdepth"] != 16:
-            raise ValueError("pypng disagrees with the header")
-        out = np.empty((height, width * planes), np.uint16)
-        filled = 0
-        for row in rows:
-            if filled == height:
-                raise ValueError("more rows than declared")
-            out[filled] = np.frombuffer(row, dtype=np.uint16) if not isinstance(row, list) else row
-            filled += 1
-        if filled != height:
-            raise ValueError(f"{filled} rows of {height}")
-    return out.reshape(height, width, planes)
+        if (width, height, meta["bitdepth"]) != (header.width, header.height, 16):
+            raise _error(path, "the file changed while it was read")
+        out = np.empty((height, width * meta["planes"]), np.uint16)
+        count = 0
+        for count, row in enumerate(rows, 1):
+            out[count - 1] = row
+    if count != height:
+        raise ValueError(f"pypng gave {count} rows of {height}")
+    return out.reshape(height, width, meta["planes"])
 
 
 # --------------------------------------------------------------------------- TIFF
 
-
-def _pillow_reads_tiff(header: ImageHeader, info: dict) -> bool:
-    """Pillow reads 8-bit (and smaller) TIFF with every compression, and 16-bit grey;
-    16-bit colour would be cut to 8 bits and float images go to tifffile."""
-    if info["sample_format"] != 1:
-        return False
-    return header.bit_depth <= 8 or (header.bit_depth == 16 and info["samples"] == 1)
+#: Compressions tifffile decodes without the optional imagecodecs package
+_TIFFFILE_CODECS = {1: None, 8: zlib.decompressobj, 32946: zlib.decompressobj, 34925: lzma.LZMADecompressor}
 
 
-#: Compressions the tifffile path decodes without the optional imagecodecs package
-_TIFFFILE_CODECS = {1: None, 8: "zlib", 32946: "zlib", 34925: "lzma"}
+def _decode_tifffile(path: str | os.PathLike, header: ImageHeader) -> tuple[np.ndarray, float]:
+    """16-bit colour and floating-point TIFF, through tifffile (first page only).
 
-
-def _decode_tifffile(path: str | os.PathLike, probe: _Probe) -> tuple[np.ndarray, float]:
-    """16-bit colour and floating-point TIFF, through tifffile (first page only)."""
-    header, info = probe.header, probe.info
-    codec = _TIFFFILE_CODECS.get(info["compression"], "unsupported")
-    if codec == "unsupported" or info["photometric"] not in (0, 1, 2):
-        raise _error(path, f"unsupported {header.bit_depth}-bit TIFF (compression {info['compression']}, "
-                           f"photometric {info['photometric']}); save it uncompressed or with Deflate")
-    if codec is not None:
-        _check_tiff_segments(path, info, codec)
+    tifffile inflates each strip in one piece, so the strips are first inflated here a MiB
+    at a time, counted and dropped: together they must hold at least the declared pixel
+    data (tifffile would pad what is missing, slowly) and at most twice that.
+    """
     import tifffile
 
-    _quiet_tifffile()
-    with tifffile.TiffFile(path) as tif:
+    _quiet_library_logs()
+    fh, size = _open_checked(path)
+    with fh, tifffile.TiffFile(path) as tif:
         page = tif.pages.first
+        if (page.imagewidth, page.imagelength) != (header.width, header.height):
+            raise _error(path, "the file changed while it was read")
+        compression, photometric = int(page.compression), int(page.photometric)
+        if compression not in _TIFFFILE_CODECS or photometric not in (0, 1, 2):
+            raise _error(path, f"unsupported {header.bit_depth}-bit TIFF (compression {compression}, "
+                               f"photometric {photometric}); save it uncompressed or with Deflate")
+        codec, limit, total = _TIFFFILE_CODECS[compression], 2 * page.nbytes + _PIECE, 0
+        for offset, count in zip(page.dataoffsets, page.databytecounts):
+            if offset + count > size:
+                raise _error(path, f"truncated TIFF file (a strip would end at byte {offset + count:,}, "
+                                   f"the file has {size:,} bytes)")
+            if codec is None:
+                total += count
+                continue
+            total += _inflated_size(_pieces(fh, offset, count, path, "TIFF"), codec(), limit - total)
+            if total > limit:
+                raise _error(path, "corrupt TIFF file (its strips inflate to more than its header declares)")
+        if total < page.nbytes:  # tifffile would pad the missing data, a strip at a time
+            raise _error(path, f"truncated TIFF file (its strips hold {total:,} of the {page.nbytes:,} "
+                               f"bytes of pixel data its header declares)")
         arr = page.asarray(maxworkers=1)
-        axes = page.axes
-    if axes.startswith("S") and arr.ndim == 3:  # planar configuration: samples first
-        arr = np.moveaxis(arr, 0, -1)
+        if page.axes.startswith("S") and arr.ndim == 3:  # planar configuration: samples first
+            arr = np.moveaxis(arr, 0, -1)
     if arr.shape[:2] != (header.height, header.width):
         raise ValueError(f"tifffile decodes shape {arr.shape}")
     if arr.dtype.kind == "u" and arr.dtype.itemsize <= 2:
@@ -332,149 +336,38 @@ def _decode_tifffile(path: str | os.PathLike, probe: _Probe) -> tuple[np.ndarray
     raise _error(path, f"unsupported TIFF sample type {arr.dtype}")
 
 
-def _check_tiff_segments(path: str | os.PathLike, info: dict, codec: str) -> None:
-    """Check, in bounded pieces, that compressed strips or tiles do not inflate past the
-    declared size (tifffile would otherwise inflate each strip in one piece)."""
-    limit = 2 * info["least"] + _PIECE
-    total = 0
-    fh, _ = _open_checked(path)
-    with fh:
-        for offset, count in info["segments"]:
-            inflater = zlib.decompressobj() if codec == "zlib" else lzma.LZMADecompressor()
-            fh.seek(offset)
-            left = count
-            while left and not inflater.eof:
-                piece = fh.read(min(left, _PIECE))
-                if not piece:
-                    raise _error(path, "truncated TIFF file (strip data missing)")
-                left -= len(piece)
-                while piece:
-                    out = inflater.decompress(piece, _PIECE)
-                    total += len(out)
-                    if total > limit:
-                        raise _error(path, "corrupt TIFF file (its strips inflate to more than its header declares)")
-                    if codec == "zlib":
-                        piece = inflater.unconsumed_tail
-                    else:
-                        piece = b""
-                        while not inflater.needs_input and not inflater.eof:
-                            out = inflater.decompress(b"", _PIECE)
-                            total += len(out)
-                            if total > limit:
-                                raise _error(path, "corrupt TIFF file (its strips inflate to more than its header declares)")
-                    if inflater.eof:
-                        break
-
-
-def _quiet_tifffile() -> None:
-    """tifffile logs warnings about odd files; keep them off stderr (the error says enough)."""
-    import logging
-
-    logger = logging.getLogger("tifffile")
-    if not any(isinstance(h, logging.NullHandler) for h in logger.handlers):
-        logger.addHandler(logging.NullHandler())
-
-
 # --------------------------------------------------------------------------- PNM
 
 
-def _decode_pnm(path: str | os.PathLike, probe: _Probe) -> tuple[np.ndarray, float]:
-    """PBM, PGM and PPM, plain (P1-P3) and raw (P4-P6), maxval up to 65535."""
-    header, info = probe.header, probe.info
-    kind, maxval, offset = info["kind"], info["maxval"], info["offset"]
-    w, h, c = header.width, header.height, header.channels
-    shape = (h, w, c) if c > 1 else (h, w)
-    count = w * h * c
+def _decode_raw_pnm(path: str | os.PathLike, probe: _Probe) -> tuple[np.ndarray, float]:
+    """Raw PGM and PPM whose maxval is not 255 (e.g. 16-bit, or 12-bit as 4095): numpy reads
+    the samples as stored, to be divided by the maxval; Pillow would convert them a sample
+    at a time in Python and rescale them to 8 bits (colour) or 16 bits (grey)."""
+    h, maxval = probe.header, probe.details["maxval"]
+    dtype = np.dtype(np.uint8 if maxval < 256 else ">u2")
+    count = h.pixels * h.channels * dtype.itemsize
     fh, _ = _open_checked(path)
     with fh:
-        fh.seek(offset)
-        if kind in (5, 6):
-            dtype = np.dtype(np.uint8) if maxval < 256 else np.dtype(">u2")
-            raw = fh.read(count * dtype.itemsize)
-            if len(raw) != count * dtype.itemsize:
-                raise _error(path, "truncated PNM file (pixel data missing)")
-            arr = np.frombuffer(raw, dtype=dtype).reshape(shape)
-        elif kind == 4:
-            row = (w + 7) // 8
-            raw = fh.read(row * h)
-            if len(raw) != row * h:
-                raise _error(path, "truncated PBM file (pixel data missing)")
-            bits = np.unpackbits(np.frombuffer(raw, np.uint8).reshape(h, row), axis=1)[:, :w]
-            return bits == 0, 1.0  # 1 is black
-        elif kind == 1:
-            return (_plain_bits(fh, count, path) == 0).reshape(shape), 1.0
-        else:
-            arr = _plain_numbers(fh, count, path).reshape(shape)
-    if maxval < (255 if arr.dtype == np.uint8 else 65535) and arr.size and int(arr.max()) > maxval:
+        fh.seek(probe.details["offset"])
+        raw = fh.read(count)
+    if len(raw) != count:
+        raise _error(path, "truncated PNM file (pixel data missing)")
+    arr = np.frombuffer(raw, dtype).reshape((h.height, h.width, 3) if h.channels == 3 else (h.height, h.width))
+    if arr.size and int(arr.max()) > maxval:
         raise _error(path, f"corrupt PNM file (a sample of {int(arr.max())} exceeds its maxval {maxval})")
     return arr, float(maxval)
 
 
-def _plain_bits(fh, count: int, path) -> np.ndarray:
-    """Plain PBM pixels: '0' and '1' characters, whitespace optional."""
-    out = np.empty(count, np.uint8)
-    filled = 0
-    while filled < count:
-        block = fh.read(_PLAIN_BLOCK)
-        if not block:
-            raise _error(path, f"truncated PBM file (it holds {filled:,} of its {count:,} pixels)")
-        a = np.frombuffer(block, np.uint8)
-        _check_characters(a, (a == 0x30) | (a == 0x31), path)
-        bits = a[(a == 0x30) | (a == 0x31)][: count - filled]
-        out[filled : filled + bits.size] = bits - 0x30
-        filled += bits.size
-    return out
-
-
-def _plain_numbers(fh, count: int, path) -> np.ndarray:
-    """Plain PGM/PPM samples: decimal numbers separated by whitespace, parsed by block."""
-    out = np.empty(count, np.uint16)
-    filled, carry = 0, b""
-    while filled < count:
-        block = fh.read(_PLAIN_BLOCK)
-        data = carry + block
-        if block:  # keep a number cut by the block's end for the next block
-            body = data.rstrip(b"0123456789")
-            data, carry = body, data[len(body):]
-            if len(carry) > 5:
-                raise _error(path, "corrupt PNM file (a sample has more than 5 digits)")
-        else:
-            carry = b""
-        values = _numbers(np.frombuffer(data, np.uint8), path)
-        take = min(values.size, count - filled)
-        out[filled : filled + take] = values[:take]
-        filled += take
-        if not block:
-            break
-    if filled < count:
-        raise _error(path, f"truncated PNM file (it holds {filled:,} of its {count:,} samples)")
-    return out
-
-
-def _check_characters(a: np.ndarray, allowed: np.ndarray, path) -> None:
-    space = (a == 0x20) | ((a >= 0x09) & (a <= 0x0D))
-    bad = ~(allowed | space)
-    if bad.any():
-        char = bytes(a[int(np.argmax(bad)) : int(np.argmax(bad)) + 1])
-        raise _error(path, f"corrupt PNM file (unexpected character {char!r} in the pixel data)")
-
-
-def _numbers(a: np.ndarray, path) -> np.ndarray:
-    digit = (a >= 0x30) & (a <= 0x39)
-    _check_characters(a, digit, path)
-    pad = np.zeros(1, np.int8)
-    edges = np.diff(np.concatenate((pad, digit.view(np.int8), pad)))
-    starts = np.flatnonzero(edges == 1)
-    lengths = np.flatnonzero(edges == -1) - starts
-    if lengths.size and lengths.max() > 5:
-        raise _error(path, "corrupt PNM file (a sample has more than 5 digits)")
-    values = np.zeros(starts.size, np.int64)
-    for k in range(int(lengths.max()) if lengths.size else 0):
-        more = lengths > k
-        values[more] = values[more] * 10 + (a[starts[more] + k] - 0x30)
-    if values.size and values.max() > 65535:
-        raise _error(path, f"corrupt PNM file (a sample of {int(values.max())} exceeds 65535)")
-    return values
+def _undo_pnm_rescale(arr: np.ndarray, maxval: int) -> tuple[np.ndarray, float]:
+    """Pillow's plain PGM/PPM decoder turns a sample ``v`` into ``round(v * top / maxval)``,
+    ``top`` being 255 (or 65535 for grey above maxval 255). Below ``top`` that is one to
+    one: undo it exactly, in integers, so that samples are divided by the maxval. (A plain
+    PPM above maxval 255 comes out of Pillow with 8 bits.)"""
+    top = 255 if arr.dtype == np.uint8 else 65535
+    if maxval >= top:
+        return arr, float(top)
+    wide = np.uint16 if top == 255 else np.uint32  # v * maxval + top // 2 fits
+    return (arr.astype(wide) * wide(maxval) + wide(top // 2)) // wide(top), float(maxval)
 
 
 # --------------------------------------------------------------------------- to float
