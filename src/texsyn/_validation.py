@@ -8,21 +8,25 @@ was received.
 
 from __future__ import annotations
 
+import math
 import os
+import re
 import warnings
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from .errors import InputError, InputTypeError
+from .errors import InputError, InputTypeError, MemoryLimitError
 
 __all__ = [
     "Range",
     "OneOf",
     "as_exemplar",
+    "check_memory",
     "check_output_shape",
     "normalize_rng",
     "memory_limit_bytes",
+    "parse_memory_size",
 ]
 
 
@@ -147,27 +151,113 @@ def as_exemplar(image: Any, *, name: str = "exemplar") -> np.ndarray:
     return np.ascontiguousarray(arr)
 
 
-def memory_limit_bytes() -> int:
-    """Memory a single synthesis may plan to use.
+#: the environment variable that sets the memory limit (``docs/memory.md``)
+MEMORY_LIMIT_VARIABLE = "TEXSYN_MEMORY_LIMIT"
+#: smallest and largest limit ``TEXSYN_MEMORY_LIMIT`` may set, in bytes
+MEMORY_LIMIT_RANGE = (2**20, 2**60)
 
-    ``TEXSYN_MEMORY_LIMIT`` (bytes, or with a ``K``/``M``/``G`` suffix) overrides the default,
-    which is half of the machine's physical memory.
+_SIZE_UNITS = {"": 1, "K": 2**10, "M": 2**20, "G": 2**30, "T": 2**40, "P": 2**50}
+_SIZE_PATTERN = re.compile(
+    r"(?P<number>(?:\d+(?:\.\d*)?|\.\d+)(?:e[+-]?\d+)?)\s*(?P<unit>[kmgtp]?)(?:i?b)?", re.IGNORECASE
+)
+
+
+def parse_memory_size(text: str, *, name: str = MEMORY_LIMIT_VARIABLE) -> int:
+    """Bytes named by a size such as ``512M``, ``8G``, ``1.5GiB`` or ``1000000000``.
+
+    A finite positive number of bytes with an optional suffix ``K``, ``M``, ``G``, ``T`` or
+    ``P``, optionally followed by ``B`` or ``iB`` (``K``, ``KB`` and ``KiB`` all mean 1024
+    bytes), case-insensitive; surrounding spaces are ignored. The result must lie in
+    :data:`MEMORY_LIMIT_RANGE` (1 MiB to 2**60 bytes).
+
+    Parameters
+    ----------
+    text : str
+        The size as written.
+    name : str
+        What the size is called in the error message.
+
+    Returns
+    -------
+    int
+        The size in bytes (fractions of a byte are dropped).
+
+    Raises
+    ------
+    InputError
+        One line naming ``name``, what it got and what is allowed.
     """
-    env = os.environ.get("TEXSYN_MEMORY_LIMIT")
-    if env:
-        text = env.strip().upper()
-        scale = {"K": 2**10, "M": 2**20, "G": 2**30, "T": 2**40}.get(text[-1:], 1)
-        number = text[:-1] if text[-1:] in "KMGT" else text
-        try:
-            return int(float(number) * scale)
-        except ValueError:
-            raise InputError(
-                f"TEXSYN_MEMORY_LIMIT must be a number of bytes such as 8G, got {env!r}"
-            ) from None
+    match = _SIZE_PATTERN.fullmatch(str(text).strip())
+    value = float("nan")
+    if match is not None:
+        value = float(match.group("number")) * _SIZE_UNITS[match.group("unit").upper()]
+    low, high = MEMORY_LIMIT_RANGE
+    if not math.isfinite(value) or not low <= value <= high:
+        raise InputError(
+            f"{name} must be a size such as 512M or 8G, from 1M to 1024P (a number of bytes "
+            f"with an optional K, M, G, T or P suffix), got {text!r}"
+        )
+    return int(value)
+
+
+def memory_limit_bytes() -> int:
+    """Memory a single fit, synthesis or modification may plan to use, in bytes.
+
+    ``TEXSYN_MEMORY_LIMIT`` (see :func:`parse_memory_size`: ``512M``, ``8G``...) overrides the
+    default, half of the machine's physical memory; an empty value counts as unset. Methods
+    compare their estimate of the arrays they will hold (``docs/memory.md``) with it before
+    they start.
+
+    Raises
+    ------
+    InputError
+        If ``TEXSYN_MEMORY_LIMIT`` is set to anything but an allowed size.
+    """
+    env = os.environ.get(MEMORY_LIMIT_VARIABLE, "")
+    if env.strip():
+        return parse_memory_size(env)
     try:
         return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") // 2)
     except (ValueError, OSError, AttributeError):  # pragma: no cover - non-POSIX
         return 8 * 2**30
+
+
+def _suggest_size(need: float) -> str:
+    """A value of ``TEXSYN_MEMORY_LIMIT`` a little above ``need`` bytes (e.g. ``3G``)."""
+    for unit, scale in (("P", 2**50), ("T", 2**40), ("G", 2**30), ("M", 2**20)):
+        if need >= scale or unit == "M":
+            return f"{max(1, math.ceil(need * 1.25 / scale))}{unit}"
+    return "1G"  # pragma: no cover
+
+
+def check_memory(need: float, *, what: str, advice: str) -> None:
+    """Refuse work whose estimated peak memory exceeds :func:`memory_limit_bytes`.
+
+    Parameters
+    ----------
+    need : float
+        Estimated peak bytes of the work.
+    what : str
+        The work, for the message (e.g. ``"method 'quilting' sampling 4000x4000 pixels"``).
+    advice : str
+        What the user can ask for instead (e.g. ``"request a smaller size"``).
+
+    Raises
+    ------
+    MemoryLimitError
+        One line with the estimate, the limit, where the limit comes from and how to change
+        it.
+    """
+    limit = memory_limit_bytes()
+    if need <= limit:
+        return
+    env = os.environ.get(MEMORY_LIMIT_VARIABLE, "").strip()
+    source = f"{MEMORY_LIMIT_VARIABLE}={env}" if env else f"default: half the RAM; {MEMORY_LIMIT_VARIABLE} is unset"
+    raise MemoryLimitError(
+        f"{what} would need about {_human_bytes(need)} of memory, more than the limit of "
+        f"{_human_bytes(limit)} ({source}); {advice}, or set {MEMORY_LIMIT_VARIABLE} to at "
+        f"least {_suggest_size(need)} (docs/memory.md)"
+    )
 
 
 def _human_bytes(n: float) -> str:
@@ -179,16 +269,24 @@ def _human_bytes(n: float) -> str:
 
 
 def check_output_shape(
-    shape: Any, *, bytes_per_pixel: float, name: str = "shape"
+    shape: Any, *, bytes_per_pixel: float | None = None, name: str = "shape"
 ) -> tuple[int, int]:
-    """Validate a requested output shape ``(H, W)`` against the memory limit.
+    """Validate a requested output shape ``(H, W)``, optionally against the memory limit.
+
+    Methods check their memory with :meth:`TextureSynthesizer.estimate_memory
+    <texsyn.methods.TextureSynthesizer.estimate_memory>`, which knows their parameters and
+    the exemplar; ``bytes_per_pixel`` is a rough check for callers that have no such
+    estimate.
 
     Parameters
     ----------
     shape : tuple of two positive ints
-        Requested output height and width.
-    bytes_per_pixel : float
-        The method's estimate of its working memory per output pixel.
+        Requested output height and width (a third entry, channels, is ignored).
+    bytes_per_pixel : float, optional
+        Working memory per output pixel; when given, a shape whose pixels times this
+        exceeds :func:`memory_limit_bytes` raises :class:`~texsyn.errors.MemoryLimitError`.
+    name : str
+        What the shape is called in messages.
 
     Returns
     -------
@@ -212,13 +310,11 @@ def check_output_shape(
         if d < 1:
             raise InputError(f"{name} must hold sizes of at least 1 pixel, got {shape!r}")
         out.append(int(d))
-    need = float(out[0]) * float(out[1]) * float(bytes_per_pixel)
-    limit = memory_limit_bytes()
-    if need > limit:
-        raise InputError(
-            f"output of {out[1]}x{out[0]} pixels would need about {_human_bytes(need)} of "
-            f"memory, more than the {_human_bytes(limit)} allowed (set TEXSYN_MEMORY_LIMIT "
-            "to change it); request a smaller size"
+    if bytes_per_pixel is not None:
+        check_memory(
+            float(out[0]) * float(out[1]) * float(bytes_per_pixel),
+            what=f"an output of {out[1]}x{out[0]} pixels",
+            advice="request a smaller size",
         )
     return out[0], out[1]
 

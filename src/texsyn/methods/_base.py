@@ -18,8 +18,17 @@ from typing import Any, Callable, ClassVar
 
 import numpy as np
 
-from .._validation import OneOf, Range, as_exemplar, check_output_shape, normalize_rng
+from .._validation import (
+    OneOf,
+    Range,
+    _human_bytes,
+    as_exemplar,
+    check_memory,
+    check_output_shape,
+    normalize_rng,
+)
 from ..errors import InputError, InputTypeError
+from ._memory import _dims, _pixels
 from ..ops.linalg import fixed_order
 
 __all__ = ["ParamSpec", "Progress", "SynthesisResult", "TextureSynthesizer"]
@@ -171,6 +180,23 @@ class ParamSpec:
         return self.check(value, method)
 
 
+def _planned_exemplar_shape(image: Any) -> tuple[int, ...] | None:
+    """The shape :func:`as_exemplar` would give ``image``, read without converting it.
+
+    ``None`` when the input is not an array of a shape ``as_exemplar`` accepts (it then
+    raises the precise error itself).
+    """
+    if isinstance(image, (str, bytes)) or not hasattr(image, "shape"):
+        return None
+    shape = tuple(int(s) for s in np.shape(image))
+    if len(shape) == 2 and min(shape) >= 2:
+        return shape
+    if len(shape) == 3 and min(shape[:2]) >= 2 and shape[2] in (1, 2, 3, 4):
+        channels = {1: 1, 2: 1, 3: 3, 4: 3}[shape[2]]
+        return shape[:2] if channels == 1 else shape[:2] + (3,)
+    return None
+
+
 def _docstring_params(doc: str | None) -> dict[str, str]:
     """First sentence of each entry of a numpydoc ``Parameters`` section."""
     if not doc:
@@ -210,8 +236,12 @@ class TextureSynthesizer:
     has_source_map: ClassVar[bool] = False
     #: whether every output pixel equals the exemplar pixel its source map names
     source_map_exact: ClassVar[bool] = True
-    #: rough working memory per output pixel and channel, in bytes (for the size check)
+    #: rough working memory per pixel and channel, in bytes: the default of
+    #: :meth:`memory_terms` for methods that do not model their memory in more detail
     bytes_per_pixel: ClassVar[float] = 256.0
+    #: factor on the sum of :meth:`memory_terms` for the arrays too small to be modelled one
+    #: by one and the allocator's slack; 1 MiB is added for small objects (``docs/memory.md``)
+    memory_margin: ClassVar[float] = 1.25
 
     # ------------------------------------------------------------------ parameters
     @classmethod
@@ -260,6 +290,98 @@ class TextureSynthesizer:
         args = ", ".join(f"{k}={v!r}" for k, v in self.get_params().items())
         return f"{type(self).__name__}({args})"
 
+    # ------------------------------------------------------------------ memory
+    def memory_terms(
+        self, exemplar_shape: tuple[int, ...], output_shape: tuple[int, int] | None = None
+    ) -> dict[str, float]:
+        """Named parts of the estimated peak memory, in bytes (``docs/memory.md``).
+
+        The hook that methods override: each term is an array (or group of arrays) the
+        method holds at its peak, computed from the shapes and the hyperparameters only,
+        before any work. The default counts the float64 exemplar plus
+        :attr:`bytes_per_pixel` per pixel and channel of the exemplar (fit) and of the output
+        (sampling).
+
+        Parameters
+        ----------
+        exemplar_shape : tuple
+            ``(H, W)`` or ``(H, W, C)`` of the exemplar as :meth:`fit` sees it.
+        output_shape : (int, int), optional
+            ``None`` for the peak of :meth:`fit`; otherwise the peak of sampling this size
+            from the fitted model (what ``fit`` keeps included).
+
+        Returns
+        -------
+        dict of str to float
+        """
+        h, w, c = _dims(exemplar_shape)
+        terms = {"exemplar and its statistics": (8.0 + self.bytes_per_pixel) * c * h * w}
+        if output_shape is not None:
+            terms["working arrays of the output"] = self.bytes_per_pixel * c * _pixels(output_shape)
+        return terms
+
+    def estimate_memory(
+        self, exemplar_shape: tuple[int, ...], output_shape: tuple[int, int] | None = None
+    ) -> int:
+        """Estimated peak memory of fitting, or of sampling, in bytes (``docs/memory.md``).
+
+        :attr:`memory_margin` times the sum of :meth:`memory_terms`, plus 1 MiB: the arrays
+        the method allocates (not the memory Python and the imported libraries hold anyway).
+        :meth:`fit`, :meth:`sample` and the other entry points compare it with
+        ``TEXSYN_MEMORY_LIMIT`` before they start.
+
+        Parameters
+        ----------
+        exemplar_shape : tuple
+            ``(H, W)`` or ``(H, W, C)``.
+        output_shape : (int, int), optional
+            ``None`` estimates :meth:`fit`; a shape estimates sampling that size.
+
+        Returns
+        -------
+        int
+        """
+        self._check_params()
+        out = None if output_shape is None else tuple(int(v) for v in tuple(output_shape)[:2])
+        terms = self.memory_terms(tuple(exemplar_shape), out)
+        return int(np.ceil(self._memory_total(terms)))
+
+    def _memory_total(self, terms: dict[str, float]) -> float:
+        """:attr:`memory_margin` times the terms, plus 1 MiB of small arrays and objects."""
+        return self.memory_margin * float(sum(terms.values())) + 2.0**20
+
+    def _check_memory(
+        self,
+        exemplar_shape: tuple[int, ...],
+        output_shape: tuple[int, int] | None = None,
+        *,
+        task: str | None = None,
+        advice: str | None = None,
+        terms: dict[str, float] | None = None,
+    ) -> None:
+        """Raise :class:`~texsyn.errors.MemoryLimitError` when the estimate exceeds the limit."""
+        if terms is None:
+            terms = self.memory_terms(tuple(exemplar_shape), output_shape)
+        need = self._memory_total(terms)
+        main, size = max(terms.items(), key=lambda kv: kv[1])
+        h, w = exemplar_shape[:2]
+        if task is None:
+            if output_shape is None:
+                task = f"fitting a {w}x{h} exemplar"
+            else:
+                task = f"sampling {output_shape[1]}x{output_shape[0]} pixels from a {w}x{h} exemplar"
+        if advice is None:
+            advice = (
+                "use a smaller exemplar or smaller parameters"
+                if output_shape is None
+                else "request a smaller size or smaller parameters"
+            )
+        check_memory(
+            need,
+            what=f"method {self.name!r} {task} (mostly {main}: {_human_bytes(size)})",
+            advice=advice,
+        )
+
     # ------------------------------------------------------------------ fit / sample
     def min_exemplar_size(self) -> tuple[int, str]:
         """Smallest exemplar side this configuration accepts, and why."""
@@ -277,8 +399,17 @@ class TextureSynthesizer:
         Returns
         -------
         self
+
+        Raises
+        ------
+        MemoryLimitError
+            Before any work, when :meth:`estimate_memory` of the fit exceeds
+            ``TEXSYN_MEMORY_LIMIT`` (``docs/memory.md``).
         """
         self._check_params()
+        planned = _planned_exemplar_shape(exemplar)
+        if planned is not None:  # before the (float64) conversion of a large array
+            self._check_memory(planned)
         ex = as_exemplar(exemplar)
         side, why = self.min_exemplar_size()
         if min(ex.shape[:2]) < side:
@@ -286,6 +417,8 @@ class TextureSynthesizer:
                 f"exemplar of {ex.shape[1]}x{ex.shape[0]} pixels is too small for method "
                 f"{self.name!r}: {why}"
             )
+        if planned != ex.shape:
+            self._check_memory(ex.shape)
         self.exemplar_ = ex
         self._fit(ex)
         return self
@@ -311,7 +444,8 @@ class TextureSynthesizer:
         Parameters
         ----------
         shape : (int, int), optional
-            Output ``(height, width)``; twice the exemplar by default. Any size is allowed.
+            Output ``(height, width)``; twice the exemplar by default. Any size whose
+            :meth:`estimate_memory` fits in ``TEXSYN_MEMORY_LIMIT`` is allowed.
         rng : None, int or numpy.random.Generator
             Source of randomness; the same value gives the same texture.
         callback : callable, optional
@@ -320,6 +454,11 @@ class TextureSynthesizer:
         Returns
         -------
         ndarray of float32, values clipped to [0, 1], rank and channels of the exemplar.
+
+        Raises
+        ------
+        MemoryLimitError
+            Before any work, when the estimate exceeds the limit (``docs/memory.md``).
         """
         return self.sample_with_map(shape, rng=rng, callback=callback).image
 
@@ -335,8 +474,8 @@ class TextureSynthesizer:
         ex = self._require_fitted()
         if shape is None:
             shape = (2 * ex.shape[0], 2 * ex.shape[1])
-        channels = 1 if ex.ndim == 2 else ex.shape[2]
-        out_shape = check_output_shape(shape, bytes_per_pixel=self.bytes_per_pixel * channels)
+        out_shape = check_output_shape(shape)
+        self._check_memory(ex.shape, out_shape)
         generator = normalize_rng(rng)
         image, source = self._sample(out_shape, generator, callback)
         result = self._as_output(image)

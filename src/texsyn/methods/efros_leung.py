@@ -9,6 +9,7 @@ import numpy as np
 from .._validation import Range
 from ..ops.nonparametric import NonParametricSampler
 from ._base import Progress, TextureSynthesizer
+from ._memory import _dims, _nonparametric_bytes, _output_bytes
 from ..errors import InputError
 
 __all__ = ["EfrosLeung"]
@@ -50,7 +51,6 @@ class EfrosLeung(TextureSynthesizer):
     summary = "Efros-Leung pixel-by-pixel non-parametric sampling"
     reference = "Efros, Leung, ICCV 1999"
     has_source_map = True
-    bytes_per_pixel = 64.0
 
     def __init__(
         self,
@@ -78,6 +78,19 @@ class EfrosLeung(TextureSynthesizer):
 
     def _fit(self, exemplar: np.ndarray) -> None:
         self.sampler_ = NonParametricSampler(exemplar, self.window_size)
+
+    def memory_terms(self, exemplar_shape, output_shape=None) -> dict[str, float]:
+        """Every exemplar window (squared and scaled, ``16 K w^2 C`` bytes); the canvas and one
+        batch of searches against all windows (``docs/memory.md``)."""
+        h, w, c = _dims(exemplar_shape)
+        kept, transient = _nonparametric_bytes(h, w, c, self.window_size, output_shape)
+        terms = {"exemplar windows": 8.0 * h * w * c + kept}
+        if output_shape is None:
+            terms["window extraction"] = transient
+            return terms
+        terms["canvas and one batch of searches"] = transient
+        terms["output image"] = _output_bytes(c, output_shape)
+        return terms
 
     def _sample(self, shape, rng, callback):
         report = None

@@ -41,6 +41,7 @@ from ..ops import (
 from ..ops.gaussian import local_gaussian
 from ..ops.portilla import max_scales
 from ._base import Progress, TextureSynthesizer
+from ._memory import _dims, _fft_search_bytes, _output_bytes
 from ..errors import InputError
 from ..ops.linalg import fixed_order
 
@@ -81,6 +82,11 @@ class _PatchSource:
     def nearest(self, query: np.ndarray, weights: np.ndarray | None, m: int) -> np.ndarray:
         """Flat anchors of the ``m`` exemplar windows nearest to ``query`` (tie-safe)."""
         return knn_select(self.search.distances(query, weights), m)
+
+
+def _local_gaussian_bytes(m: int, dim: int) -> float:
+    """Gathered neighbour patches, the centred factor and a conditional draw of ``dim`` entries."""
+    return 24.0 * m * dim + 8.0 * m * m + 32.0 * dim
 
 
 def _clamp_neighbours(m: int, source: _PatchSource, name: str) -> int:
@@ -187,7 +193,6 @@ class _LocalGaussianBase(TextureSynthesizer):
     """Shared fit/sample of the single-scale models (LG, CLG, RCLG)."""
 
     has_source_map = False
-    bytes_per_pixel = 128.0
     _model = "lg"
 
     def _overlap_px(self) -> int:
@@ -200,6 +205,24 @@ class _LocalGaussianBase(TextureSynthesizer):
     def _fit(self, exemplar: np.ndarray) -> None:
         ex = as_channels(exemplar)
         self.source_ = _PatchSource(ex, ex, self.patch_size)
+
+    def memory_terms(self, exemplar_shape, output_shape=None) -> dict[str, float]:
+        """Exemplar spectra; the canvas, one FFT search and one local Gaussian (``docs/memory.md``)."""
+        h, w, c = _dims(exemplar_shape)
+        kept, build, query = _fft_search_bytes(h, w, c, masks=9)
+        terms = {"exemplar and its spectra": 8.0 * h * w * c + kept}
+        if output_shape is None:
+            terms["spectra construction"] = build
+            return terms
+        n = self.patch_size
+        step = n - self._overlap_px()
+        canvas = [n + step * max(0, -(-(side - n) // step)) for side in output_shape[:2]]
+        m = min(self.n_neighbors, max(1, (h - n + 1) * (w - n + 1)))
+        # the search's transients are freed before the neighbours are gathered
+        terms["one search or one local Gaussian"] = max(query, _local_gaussian_bytes(m, n * n * c))
+        terms["canvas"] = float(canvas[0]) * canvas[1] * (8.0 * c + 1.0)
+        terms["output image"] = _output_bytes(c, output_shape)
+        return terms
 
     def _sample(self, shape, rng, callback):
         ex = as_channels(self.exemplar_)
@@ -443,7 +466,6 @@ class MSLG(TextureSynthesizer):
     summary = "Multiscale locally Gaussian patch sampling"
     reference = "Raad, Desolneux, Morel, JMIV 2016 (MSLG)"
     has_source_map = False
-    bytes_per_pixel = 160.0
 
     def __init__(
         self,
@@ -479,6 +501,47 @@ class MSLG(TextureSynthesizer):
             f"with n_scales={self.n_scales} the coarsest scale is 1/{2 ** (self.n_scales - 1)} of the "
             f"exemplar and patch_size={self.patch_size} needs at least {self.patch_size + 1} pixels there"
         )
+
+    def memory_terms(self, exemplar_shape, output_shape=None) -> dict[str, float]:
+        """FFT searches of every scale; the Fourier zoom-in of the finest scale (``docs/memory.md``).
+
+        The zoom-in transforms the mirror extension of each scale, a complex image four times
+        the size of the next one, so it dominates the sampling of large outputs.
+        """
+        h, w, c = _dims(exemplar_shape)
+        big = 2 ** (self.n_scales - 1)
+        hc, wc = (h // big) * big, (w // big) * big
+        kept_total, build_max = 8.0 * h * w * c, 0.0
+        for k in range(self.n_scales):
+            sh, sw = hc >> k, wc >> k
+            coarse = k == self.n_scales - 1
+            kept, build, _ = _fft_search_bytes(sh, sw, c if coarse else 2 * c)
+            kept_total += kept + 8.0 * sh * sw * c * (1 if coarse else 2)
+            build_max = max(build_max, build + 24.0 * sh * sw * c)
+        terms = {"exemplar scales and their spectra": kept_total}
+        post = None
+        if self.post == "portilla_simoncelli":
+            from .portilla_simoncelli import PortillaSimoncelli
+
+            post = PortillaSimoncelli(n_scales=max_scales((h, w)), n_iterations=self.post_iterations)
+            terms["Portilla-Simoncelli statistics"] = sum(post.memory_terms(exemplar_shape).values())
+        if output_shape is None:
+            terms["spectra construction"] = build_max
+            return terms
+        n = self.patch_size
+        canvas = float(big * max(-(-output_shape[0] // big), n)) * float(big * max(-(-output_shape[1] // big), n))
+        m = min(self.n_neighbors, max(1, ((hc >> (self.n_scales - 1)) - n + 1) * ((wc >> (self.n_scales - 1)) - n + 1)))
+        _, _, query = _fft_search_bytes(hc, wc, 2 * c if self.n_scales > 1 else c, masks=9)
+        search = max(query, _local_gaussian_bytes(m, n * n * c))
+        zoom = (280.0 if self.zoom_boundary == "symmetric" else 48.0) * c * canvas
+        if self.n_scales > 1:
+            terms["Fourier zoom-in of the finest scale"] = zoom + 8.0 * c * canvas / 4
+        terms["one search or one local Gaussian"] = search
+        terms["canvas, low-pass and mask"] = canvas * (16.0 * c + 1.0)
+        terms["output image"] = _output_bytes(c, output_shape)
+        if post is not None:
+            terms["Portilla-Simoncelli refinement"] = sum(post.memory_terms(exemplar_shape, output_shape).values())
+        return terms
 
     def _fit(self, exemplar: np.ndarray) -> None:
         ex = crop_to_multiple(as_channels(exemplar), 2 ** (self.n_scales - 1))

@@ -28,6 +28,7 @@ from ..ops.flow import association_fields, builtin_flow, orient_field, structure
 from ..ops.fluid import advect, diffuse, project, rescale_speed
 from ..ops.grouplets import WaveletGroupletTransform
 from ._base import Progress, TextureSynthesizer
+from ._memory import _dims, _output_bytes, _pixels
 from ..errors import InputError
 from ..ops.linalg import fixed_order
 
@@ -199,7 +200,6 @@ class Grouplets(TextureSynthesizer):
     summary = "Grouplet synthesis of oriented textures along a flow; fluid-driven animation (texsyn animate)"
     reference = "G. Peyré, Dynamic Texture Synthesis with Grouplets, MAPMO workshop 2008"
     has_source_map = False
-    bytes_per_pixel = 600.0
 
     def __init__(
         self,
@@ -236,6 +236,44 @@ class Grouplets(TextureSynthesizer):
 
     def min_exemplar_size(self) -> tuple[int, str]:
         return 8, "the structure tensor and the pyramid need at least 8x8 pixels"
+
+    # ------------------------------------------------------------------ memory
+    def _bands(self, c: int) -> int:
+        """Coefficient planes per pixel: ``(levels + 1) (grouplet_levels + 1)`` per channel."""
+        channels = 3 if c == 3 and self.colour == "pca" else 1
+        return (self.levels + 1) * (self.grouplet_levels + 1) * channels
+
+    def memory_terms(self, exemplar_shape, output_shape=None) -> dict[str, float]:
+        """Sorted wavelet-grouplet coefficients; the output's coefficients, targets and fields.
+
+        The redundant transform has ``(levels + 1)(grouplet_levels + 1)`` planes per channel;
+        a projection holds about four copies of them besides the cached histogram targets
+        (``docs/memory.md``).
+        """
+        h, w, c = _dims(exemplar_shape)
+        k = float(h * w)
+        bands = self._bands(c)
+        depth = self.grouplet_levels
+        terms = {"exemplar and its sorted coefficients": 8.0 * bands * k + 40.0 * k * c}
+        if output_shape is None:
+            terms["analysis of the exemplar"] = 12.0 * bands * k + 20.0 * depth * k + 100.0 * k + 24.0 * k * c
+            return terms
+        pixels = _pixels(output_shape)
+        terms["histogram targets"] = 8.0 * bands * pixels + 8.0 * c * pixels
+        terms["coefficients of one projection"] = 24.0 * bands * pixels
+        terms["association fields and flow"] = 40.0 * depth * pixels + 120.0 * pixels
+        terms["output image"] = 8.0 * c * pixels + _output_bytes(c, output_shape)
+        return terms
+
+    def _animate_terms(self, exemplar_shape, shape, loop: int) -> dict[str, float]:
+        """:meth:`memory_terms` of a frame plus the fluid fields and the frames a loop keeps."""
+        _, _, c = _dims(exemplar_shape)
+        terms = self.memory_terms(exemplar_shape, shape)
+        pixels = _pixels(shape)
+        terms["velocity, advection and diffusion"] = 160.0 * pixels + 24.0 * c * pixels
+        if loop:
+            terms["frames kept for the loop"] = loop * pixels * (4.0 * c + 16.0)
+        return terms
 
     def _fit(self, exemplar: np.ndarray) -> None:
         if self.flow != "learned":
@@ -279,11 +317,14 @@ class Grouplets(TextureSynthesizer):
         flow : ndarray, shape (H, W, 2)
             Raw ``(row, col)`` vectors; only their direction matters, zeros are stagnation points.
         """
-        self._require_fitted()
+        ex = self._require_fitted()
         flow = np.asarray(flow, dtype=np.float64)
         if flow.ndim != 3 or flow.shape[2] != 2:
             raise InputError(f"flow must have shape (H, W, 2), got {flow.shape}")
-        check_output_shape(flow.shape[:2], bytes_per_pixel=self.bytes_per_pixel * self.model_.channels)
+        size = check_output_shape(flow.shape[:2], name="flow shape")
+        self._check_memory(
+            ex.shape, size, task=f"synthesising along a {size[1]}x{size[0]} flow", advice="use a smaller flow"
+        )
         return self._as_output(self._along(flow, normalize_rng(rng), callback))
 
     def _along(self, flow, rng, callback):
@@ -339,13 +380,20 @@ class Grouplets(TextureSynthesizer):
         ------
         Frame
         """
+        ex = self._require_fitted()
+        shape = tuple(ex.shape[:2]) if shape is None else check_output_shape(shape)
+        self._check_memory(
+            ex.shape,
+            shape,
+            task=f"animating {shape[1]}x{shape[0]} frames",
+            advice="request smaller frames" + (" or a shorter loop" if loop else ""),
+            terms=self._animate_terms(ex.shape, shape, int(loop) if loop else 0),
+        )
         if loop:
             yield from self._looped(n_frames, shape, rng=rng, callback=callback, overlap=int(loop))
             return
-        ex = self._require_fitted()
         if int(n_frames) < 1:
             raise InputError(f"n_frames must be at least 1, got {n_frames}")
-        shape = tuple(ex.shape[:2]) if shape is None else check_output_shape(shape, bytes_per_pixel=self.bytes_per_pixel * self.model_.channels)
         generator = normalize_rng(rng)
         model: GroupletModel = self.model_
         velocity = self.initial_velocity(shape, generator)

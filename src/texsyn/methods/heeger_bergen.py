@@ -15,6 +15,7 @@ from ..ops import (
     periodic_smooth_decomposition,
 )
 from ._base import Progress, TextureSynthesizer
+from ._memory import _dims, _output_bytes
 
 __all__ = ["HeegerBergen"]
 
@@ -53,7 +54,6 @@ class HeegerBergen(TextureSynthesizer):
     name = "heeger_bergen"
     summary = "Heeger-Bergen steerable-pyramid histogram matching"
     reference = "Heeger, Bergen, SIGGRAPH 1995; Briand et al., IPOL 2014"
-    bytes_per_pixel = 600.0
 
     def __init__(
         self,
@@ -71,6 +71,36 @@ class HeegerBergen(TextureSynthesizer):
     def min_exemplar_size(self):
         side = 2**self.n_scales
         return side, f"n_scales={self.n_scales} needs at least {side}x{side} pixels"
+
+    def _pyramid_bytes(self, pixels: float, channels: int) -> tuple[float, float]:
+        """``(filters, coefficients)`` bytes of a steerable pyramid of ``pixels`` pixels."""
+        scales = sum(4.0**-j for j in range(self.n_scales))
+        coefficients = 8.0 * channels * pixels * (1.0 + self.n_orientations * scales + 4.0**-self.n_scales)
+        filters = pixels * ((4.0 + 8.0 * self.n_orientations) * scales + 16.0)
+        return filters, coefficients
+
+    def memory_terms(self, exemplar_shape, output_shape=None) -> dict[str, float]:
+        """Sorted subbands of the exemplar; pyramid filters, two sets of subbands and targets.
+
+        See ``docs/memory.md``.
+        """
+        h, w, c = _dims(exemplar_shape)
+        k = float(h * w)
+        _, coefficients = self._pyramid_bytes(k, c)
+        terms = {"exemplar and its sorted subbands": 16.0 * k * c + coefficients}
+        if output_shape is None:
+            filters, _ = self._pyramid_bytes(k, c)
+            terms["pyramid of the exemplar"] = filters + coefficients + 24.0 * k * c
+            return terms
+        side = 2**self.n_scales
+        canvas = float(max(output_shape[0], side)) * float(max(output_shape[1], side))
+        filters, coefficients = self._pyramid_bytes(canvas, c)
+        terms["pyramid filters"] = filters
+        terms["histogram targets"] = coefficients + 8.0 * c * canvas
+        terms["subbands (two iterations)"] = 2.0 * coefficients
+        terms["image and spectra"] = 40.0 * c * canvas
+        terms["output image"] = _output_bytes(c, output_shape)
+        return terms
 
     def _fit(self, exemplar: np.ndarray) -> None:
         ex = as_channels(exemplar)

@@ -21,11 +21,17 @@ from typing import Annotated, Callable, Sequence
 
 import numpy as np
 
-from .._validation import OneOf, Range, as_exemplar, memory_limit_bytes
+from .._validation import OneOf, Range, as_exemplar
 from ..ops import as_channels, luma, match_histogram
-from ..ops.patch_wavelet import PatchWaveletCoefficients, PatchWaveletTransform
+from ..ops.patch_wavelet import (
+    PatchWaveletCoefficients,
+    PatchWaveletTransform,
+    descriptor_dimension,
+    planned_widths,
+)
 from ._base import Progress, TextureSynthesizer
-from ..errors import InputError, MemoryLimitError
+from ._memory import _dims, _output_bytes
+from ..errors import InputError
 from ..ops.linalg import fixed_order
 
 __all__ = ["Modification", "PatchWavelet"]
@@ -45,9 +51,10 @@ class Modification:
         Exemplar position of every output pixel.
     feature_map : ndarray of int32, shape (H, W, 2)
         The input expressed with the exemplar's features (eq. 4), before the transform.
-    magnitudes : ndarray of float64, shape (n, n)
+    magnitudes : ndarray of float64, shape (n_h, n_w)
         Magnitudes of the kept details, packed like a wavelet transform (Fig. 7 b, d, f, h);
-        ``n`` is the input side rounded up to a power of two.
+        ``n_h`` and ``n_w`` are the input's height and width, each rounded up to a power of
+        two (``n x n`` for a square input).
     ratio : float
         The threshold as a fraction of the largest detail magnitude.
     """
@@ -69,8 +76,8 @@ class PatchWavelet(TextureSynthesizer):
     ----------
     min_width : int
         Smallest patch width ``W_min``; level ``j`` uses ``clamp(2^j, min_width, W_max)`` with
-        ``W_max`` the largest power of two up to half the exemplar (spec 01, A7; 2 is the
-        literal paper).
+        ``W_max`` the largest power of two up to half the exemplar (2 is the paper's
+        literal choice).
     max_resolution : int
         Wider patches are compared through ``max_resolution x max_resolution`` block means.
     sigma : tuple of float
@@ -85,7 +92,7 @@ class PatchWavelet(TextureSynthesizer):
         Neighbours of the locally linear embedding.
     lle_points : int
         LLE runs on at most this many landmark patches; the others are placed by barycentric
-        weights (spec 01, A11).
+        weights.
     exemplar_boundary : str
         Extension of the exemplar past its border: 'auto' (periodic if it tiles, else
         symmetric), 'periodic' or 'symmetric'.
@@ -103,7 +110,6 @@ class PatchWavelet(TextureSynthesizer):
     )
     has_source_map = True
     source_map_exact = True
-    bytes_per_pixel = 96.0
 
     def __init__(
         self,
@@ -152,22 +158,170 @@ class PatchWavelet(TextureSynthesizer):
     def _fit(self, exemplar: np.ndarray) -> None:
         # descriptors and search indexes of every width; the LLE embeddings are computed on
         # first use (only random details and modification need them) and kept.
-        transform = self._make_transform(exemplar)
-        self._check_index_memory(transform)
-        self.transform_ = transform.prepare()
+        # (memory was checked by fit, from memory_terms, before this point)
+        self.transform_ = self._make_transform(exemplar).prepare()
+
+    # ------------------------------------------------------------------ memory
+    def _width_dims(self, exemplar_shape) -> list[tuple[int, int]]:
+        """``(width, descriptor length)`` of every index the transform builds."""
+        _, _, c = _dims(exemplar_shape)
+        widths = planned_widths(exemplar_shape, min_width=self.min_width, feature_width=self.feature_width)
+        return [(width, descriptor_dimension(width, self.max_resolution, c)) for width in widths]
+
+    def _model_terms(self, exemplar_shape) -> dict[str, float]:
+        """What a prepared transform holds: float32 indexes, extended exemplar, block means."""
+        h, w, c = _dims(exemplar_shape)
+        k = float(h * w)
+        pairs = self._width_dims(exemplar_shape)
+        block_means = sum(1 for width, _ in pairs if width > self.max_resolution)
+        return {
+            "patch indexes": sum(4.0 * k * d + 4.0 * k for _, d in pairs),
+            "extended exemplar and block means": 32.0 * k * c * (1 + block_means) + 8.0 * k * c,
+        }
+
+    def _build_bytes(self, exemplar_shape) -> float:
+        """Transient of building the largest index: float64 descriptors and their centred copy."""
+        h, w, _ = _dims(exemplar_shape)
+        k = float(h * w)
+        return max(20.0 * k * d + 16.0 * k * math.sqrt(d) + 16.0 * k for _, d in self._width_dims(exemplar_shape))
+
+    def _query_bytes(self, n_queries: float, dim: int, k: float, *, glued: bool) -> float:
+        """Transient of one chunk of nearest-patch queries (descriptors, products, re-ranking)."""
+        chunk = min(n_queries, max(1, 2**22 // dim))
+        block = min(chunk, 1024)
+        make = (16.0 if glued else 8.0) * chunk * dim
+        # a block's products are still referenced while the next block's are computed
+        grams = 2.0 if chunk > block else 1.0
+        search = 4.0 * grams * block * k + max(12.0 * block * dim, 16.0 * block * self.candidates * dim)
+        return max(make, 8.0 * chunk * dim + search) + 48.0 * chunk
+
+    def _transform_query_bytes(self, grid: float, levels: int, exemplar_shape) -> float:
+        """Largest query transient of a forward or inverse transform of ``grid`` samples.
+
+        Level ``j`` predicts at most ``grid / 2^(2j - 1)`` samples with windows of
+        ``clamp(2^j, min_width, W_max)``.
+        """
+        h, w, _ = _dims(exemplar_shape)
+        dims = dict(self._width_dims(exemplar_shape))
+        top = max(dims)
+        low = min(self.min_width, top)
+        return max(
+            self._query_bytes(max(1.0, grid / 2 ** (2 * j - 1)), dims[int(min(max(2**j, low), top))], float(h * w), glued=True)
+            for j in range(1, levels + 1)
+        )
+
+    def _embedding_bytes(self, k: float, dim: int) -> tuple[float, float]:
+        """``(kept, transient)`` bytes of the LLE embedding of one width (coordinates and tree)."""
+        p = self.embedding_dim
+        n = min(k, self.lle_points * 1.0)
+        neighbours = self.lle_neighbors + 40
+        kept = k * (16.0 * p + 32.0)
+        transient = 16.0 * k * dim + 8.0 * n * dim + (24.0 * n * n if n <= 512 else 64.0 * n * neighbours)
+        transient += 8.0 * k * (neighbours + dim)
+        return kept, transient
+
+    def _levels_widths(self, exemplar_shape, levels: int) -> set[int]:
+        pairs = self._width_dims(exemplar_shape)
+        top = max(w for w, _ in pairs)
+        low = min(self.min_width, top)
+        return {int(min(max(2**level, low), top)) for level in range(1, levels + 1)}
+
+    def memory_terms(self, exemplar_shape, output_shape=None) -> dict[str, float]:
+        """Patch indexes of every width, their construction, searches and coordinate maps.
+
+        The fit holds one float32 index of ``H W`` descriptors per window width (the
+        descriptor has ``min(width, max_resolution)^2 C`` entries) and builds each from
+        float64 descriptors; a synthesis of ``h x w`` works on the ``N x N`` coordinate map of
+        the next power of two ``N >= max(h, w)`` and searches in chunks (``docs/memory.md``).
+        """
+        h, w, c = _dims(exemplar_shape)
+        k = float(h * w)
+        terms = self._model_terms(exemplar_shape)
+        if output_shape is None:
+            terms["float64 descriptors while building the patch indexes"] = self._build_bytes(exemplar_shape)
+            return terms
+        oh, ow = output_shape[:2]
+        n = float(2 ** max(2, math.ceil(math.log2(max(oh, ow)))))
+        grid = n * n
+        levels = int(math.log2(n)) - 1
+        used = self._levels_widths(exemplar_shape, levels)
+        dims = dict(self._width_dims(exemplar_shape))
+        transient = self._transform_query_bytes(grid, levels, exemplar_shape)
+        sig = self.sigma_profile(levels)
+        noisy = {int(min(max(2**level, min(used)), max(used))) for level in range(1, levels + 1) if sig[level - 1] > 0}
+        if noisy:
+            kept = [self._embedding_bytes(k, dims[width]) for width in noisy]
+            terms["embeddings"] = sum(e[0] for e in kept)
+            transient = max(transient, max(e[1] for e in kept))
+            terms["random details"] = grid * self.embedding_dim * 8.0 * 2
+        terms["searches and embeddings (largest)"] = transient
+        terms["coordinate maps"] = 64.0 * grid
+        terms["output image"] = 8.0 * c * float(oh) * float(ow) + _output_bytes(c, output_shape)
+        return terms
+
+    def estimate_modify_memory(
+        self,
+        exemplar_shape: tuple[int, ...],
+        texture_shape: tuple[int, ...],
+        *,
+        equalize: bool = True,
+        n_ratios: int = 1,
+    ) -> int:
+        """Estimated peak bytes of :meth:`modify` of a texture of ``texture_shape`` (``docs/memory.md``).
+
+        Parameters
+        ----------
+        exemplar_shape, texture_shape : tuple
+            ``(H, W)`` or ``(H, W, C)``.
+        equalize : bool
+            Whether the exemplar is equalised first (a second set of indexes is built).
+        n_ratios : int
+            Number of thresholds (results kept at once).
+
+        Returns
+        -------
+        int
+        """
+        self._check_params()
+        terms = self._modify_terms(exemplar_shape, texture_shape, equalize, n_ratios)
+        return int(math.ceil(self._memory_total(terms)))
+
+    def _modify_terms(self, exemplar_shape, texture_shape, equalize: bool, n_ratios: int) -> dict[str, float]:
+        h, w, c = _dims(exemplar_shape)
+        k = float(h * w)
+        n_h, n_w = self.modify_grid(texture_shape[:2])
+        grid = float(n_h * n_w)
+        th, tw = texture_shape[:2]
+        model = self._model_terms(exemplar_shape)
+        terms = {"fitted patch indexes": sum(model.values())}
+        transients = []
+        if equalize:
+            terms["patch indexes of the equalised exemplar"] = sum(model.values())
+            transients.append(self._build_bytes(exemplar_shape))
+        dims = dict(self._width_dims(exemplar_shape))
+        feature = min(self.feature_width, max(dims))
+        transients.append(self._query_bytes(grid, dims[feature], k, glued=False))
+        levels = int(math.log2(min(n_h, n_w)))
+        used = self._levels_widths(exemplar_shape, levels)
+        transients.append(self._transform_query_bytes(grid, levels, exemplar_shape))
+        kept = [self._embedding_bytes(k, dims[width]) for width in used]
+        terms["embeddings"] = sum(e[0] for e in kept)
+        transients.append(max(e[1] for e in kept))
+        terms["searches and embeddings (largest)"] = max(transients)
+        terms["texture, its extension and feature map"] = grid * (40.0 * c + 40.0)
+        terms["wavelet details"] = grid * (self.embedding_dim * 8.0 + 8.0) * (1 + n_ratios)
+        per_result = grid * 8.0 + float(th) * float(tw) * (8.0 * c + 24.0) + _output_bytes(c, texture_shape)
+        terms["coordinate maps and results"] = 64.0 * grid + n_ratios * per_result
+        return terms
 
     @staticmethod
-    def _check_index_memory(transform: PatchWaveletTransform) -> None:
-        """Refuse exemplars whose float32 search indexes would not fit in memory."""
-        h, w = transform.exemplar_shape
-        need = sum(4.0 * h * w * transform.windows.dimension(width) for width in transform.widths())
-        limit = memory_limit_bytes()
-        if need > limit:
-            raise MemoryLimitError(
-                f"exemplar of {w}x{h} pixels needs about {need / 2**30:.1f} GiB of patch indexes for "
-                f"method 'patch_wavelet', more than the {limit / 2**30:.1f} GiB allowed; use a smaller "
-                "exemplar, a smaller max_resolution, or set TEXSYN_MEMORY_LIMIT"
-            )
+    def modify_grid(shape: tuple[int, int]) -> tuple[int, int]:
+        """Sample grid ``(n_h, n_w)`` that :meth:`modify` analyses for an input of ``shape``.
+
+        Each side is rounded up to a power of two (at least 2) on its own, so the grid has
+        fewer than four times the input's pixels whatever its aspect ratio.
+        """
+        return tuple(2 ** max(1, math.ceil(math.log2(max(1, int(side))))) for side in shape[:2])
 
     def sigma_profile(self, levels: int) -> np.ndarray:
         """``sigma_j`` for ``j = 1 ... levels`` (finest first)."""
@@ -223,8 +377,14 @@ class PatchWavelet(TextureSynthesizer):
         transform, the details of magnitude at most ``ratio`` times the largest are set to
         zero, and the inverse transform rebuilds it. ``ratio = 0`` rebuilds the texture from
         exemplar pixels, ``ratio = 1`` is a pure synthesis from one coarse feature; values in
-        between interpolate (Figs. 7-8). Sizes other than ``2^J x 2^J`` are extended
-        symmetrically to the next power of two and cropped back.
+        between interpolate (Figs. 7-8). Each side that is not a power of two is extended
+        symmetrically to the next one, on its own, and cropped back: an ``H x W`` input is
+        analysed on a ``2^a x 2^b`` grid (``2^a >= H``, ``2^b >= W``), so a long thin input
+        costs what its number of pixels says, not what a square of its longer side would
+        (the transform of a rectangular grid stops at ``min(a, b)`` levels and keeps a few
+        coarse features, :meth:`PatchWaveletTransform.forward
+        <texsyn.ops.patch_wavelet.PatchWaveletTransform.forward>`). Memory is checked before
+        the work (``docs/memory.md``).
 
         Parameters
         ----------
@@ -253,13 +413,22 @@ class PatchWavelet(TextureSynthesizer):
                 raise InputError(f"ratio must be a number in [0, 1], got {r!r}")
         if grid_boundary not in ("symmetric", "periodic"):
             raise InputError(f"grid_boundary must be 'symmetric' or 'periodic', got {grid_boundary!r}")
+        size = np.shape(texture) if not isinstance(texture, (str, bytes)) else ()
+        if len(size) in (2, 3) and min(size[:2]) >= 1:  # before the texture is even converted
+            (h, w), (n_h, n_w) = size[:2], self.modify_grid(size[:2])
+            self._check_memory(
+                exemplar.shape,
+                task=f"modifying a {w}x{h} texture ({n_w}x{n_h} grid) with a {exemplar.shape[1]}x{exemplar.shape[0]} exemplar",
+                advice="use a smaller texture or exemplar",
+                terms=self._modify_terms(exemplar.shape, size, bool(equalize), len(ratios)),
+            )
         tex = as_channels(np.asarray(as_exemplar(texture, name="texture"), dtype=np.float64))
         ex = as_channels(exemplar)
         if tex.shape[2] != ex.shape[2]:
             tex = np.repeat(tex, ex.shape[2], axis=2) if tex.shape[2] == 1 else luma(tex)[..., None]
         h, w = tex.shape[:2]
-        n = 2 ** max(1, math.ceil(math.log2(max(h, w))))
-        padded = np.pad(tex, ((0, n - h), (0, n - w), (0, 0)), mode="symmetric")
+        n_h, n_w = self.modify_grid((h, w))
+        padded = np.pad(tex, ((0, n_h - h), (0, n_w - w), (0, 0)), mode="symmetric")
         if equalize:
             equalized = np.stack(
                 [match_histogram(ex[..., c], tex[..., c]) for c in range(ex.shape[2])], axis=-1

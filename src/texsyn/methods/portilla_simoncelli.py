@@ -23,6 +23,7 @@ from .._validation import OneOf, Range, as_exemplar
 from ..ops import ColorPCA, as_channels, luma, periodic_smooth_decomposition
 from ..ops.portilla import ComplexSteerablePyramid, PSStatistics, pixel_statistics, ps_statistics, ps_synthesis
 from ._base import Progress, TextureSynthesizer
+from ._memory import _dims, _output_bytes
 from ..ops.linalg import fixed_order
 
 __all__ = ["PortillaSimoncelli"]
@@ -55,7 +56,6 @@ class PortillaSimoncelli(TextureSynthesizer):
         "wavelet coefficients, IJCV 2000"
     )
     has_source_map = False
-    bytes_per_pixel = 1200.0
 
     def __init__(
         self,
@@ -102,6 +102,27 @@ class PortillaSimoncelli(TextureSynthesizer):
         stats.pixel_moments, stats.pixel_range, stats.colour_covariance = pixel_statistics(coords)
         self.statistics_: PSStatistics = stats
 
+    # ------------------------------------------------------------------ memory
+    def memory_terms(self, exemplar_shape, output_shape=None) -> dict[str, float]:
+        """Complex pyramid, its magnitudes and parents, per channel (``docs/memory.md``).
+
+        An empirical model of the analysis and of one iteration of the projections: about
+        ``110 + 150 n_orientations`` bytes per pixel and channel, nearly independent of
+        ``n_scales`` (the coarser scales add a third), measured with ``tracemalloc``.
+        """
+        h, w, c = _dims(exemplar_shape)
+        k = float(h * w)
+        channels = 3 if c == 3 and self.colour == "joint" else 1
+        terms = {"exemplar": 16.0 * k * c}
+        if output_shape is None:
+            terms["analysis of the exemplar"] = k * (150.0 + channels * (100.0 + 140.0 * self.n_orientations))
+            return terms
+        ch, cw = self._canvas(output_shape)
+        canvas = float(ch) * float(cw)
+        terms["pyramids of one iteration"] = canvas * (100.0 + channels * (110.0 + 150.0 * self.n_orientations))
+        terms["output image"] = _output_bytes(c, output_shape)
+        return terms
+
     # ------------------------------------------------------------------ synthesis
     def _canvas(self, shape: tuple[int, int]) -> tuple[int, int]:
         side = 2 ** (self.n_scales + 1)
@@ -140,9 +161,10 @@ class PortillaSimoncelli(TextureSynthesizer):
         -------
         ndarray of float32 in [0, 1], the image's size, the exemplar's channels.
         """
-        self._require_fitted()
+        exemplar = self._require_fitted()
         img = np.asarray(as_exemplar(image, name="image"), dtype=np.float64)
         h, w = img.shape[:2]
+        self._check_memory(exemplar.shape, (h, w), task=f"refining a {w}x{h} image", advice="use a smaller image")
         ch, cw = self._canvas((h, w))
         padded = np.pad(as_channels(img), ((0, ch - h), (0, cw - w), (0, 0)), mode="symmetric")
         iterations = self.n_iterations if n_iterations is None else int(n_iterations)

@@ -9,6 +9,7 @@ import numpy as np
 from .._validation import Range
 from ..ops import FFTPatchSearch, as_channels, boundary_cut_mask, overlap_error
 from ._base import Progress, TextureSynthesizer
+from ._memory import _dims, _fft_search_bytes, _output_bytes
 from ..errors import InputError
 
 __all__ = ["Quilting"]
@@ -46,7 +47,6 @@ class Quilting(TextureSynthesizer):
     summary = "Efros-Freeman image quilting with minimum-error boundary cuts"
     reference = "Efros, Freeman, SIGGRAPH 2001"
     has_source_map = True
-    bytes_per_pixel = 64.0
 
     def __init__(
         self,
@@ -77,6 +77,25 @@ class Quilting(TextureSynthesizer):
 
     def _fit(self, exemplar: np.ndarray) -> None:
         self.search_ = FFTPatchSearch(exemplar, (self.patch_size, self.patch_size))
+
+    def memory_terms(self, exemplar_shape, output_shape=None) -> dict[str, float]:
+        """Exemplar spectra of the FFT search; the block canvas, its source map and one search.
+
+        See ``docs/memory.md``.
+        """
+        h, w, c = _dims(exemplar_shape)
+        kept, build, query = _fft_search_bytes(h, w, c, masks=3)
+        terms = {"exemplar and its spectra": 8.0 * h * w * c + kept}
+        if output_shape is None:
+            terms["spectra construction"] = build
+            return terms
+        step, o = self.patch_size - self._overlap(), self._overlap()
+        rows = max(1, -(-(output_shape[0] - o) // step)) * step + o
+        cols = max(1, -(-(output_shape[1] - o) // step)) * step + o
+        terms["one block search"] = query
+        terms["canvas and source map"] = float(rows) * cols * (8.0 * c + 8.0)
+        terms["output image"] = _output_bytes(c, output_shape)
+        return terms
 
     def _sample(self, shape, rng, callback):
         ex = as_channels(self.exemplar_)

@@ -7,6 +7,7 @@ import numpy as np
 
 from ..ops import as_channels, periodic_smooth_decomposition
 from ._base import TextureSynthesizer
+from ._memory import _dims, _output_bytes, _pixels
 
 __all__ = ["RandomPhase", "random_phase_noise"]
 
@@ -69,10 +70,24 @@ class RandomPhase(TextureSynthesizer):
     name = "random_phase"
     summary = "Random phase noise: exemplar Fourier modulus with a random phase"
     reference = "Galerne, Gousseau, Morel, IEEE TIP 2011"
-    bytes_per_pixel = 96.0
 
     def __init__(self, *, periodic_component: bool = True):
         self.periodic_component = periodic_component
+
+    def memory_terms(self, exemplar_shape, output_shape=None) -> dict[str, float]:
+        """The spot; the embedded spot, its spectrum and the random phase (``docs/memory.md``)."""
+        h, w, c = _dims(exemplar_shape)
+        k = float(h * w)
+        terms = {"exemplar and spot": 16.0 * k * c}
+        if output_shape is None:
+            terms["periodic component"] = 24.0 * k * c + 16.0 * k
+            return terms
+        canvas = float(max(output_shape[0], h)) * float(max(output_shape[1], w))
+        # the spectra are freed before the output is cropped, shifted and converted
+        terms["embedded spot, spectra and phase"] = max(
+            canvas * (40.0 * c + 28.0), 8.0 * c * _pixels(output_shape) + _output_bytes(c, output_shape)
+        )
+        return terms
 
     def _fit(self, exemplar: np.ndarray) -> None:
         ex = as_channels(exemplar)

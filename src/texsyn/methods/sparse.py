@@ -37,6 +37,7 @@ from ..ops import (
 from ..ops.graphcut import graphcut_reassemble
 from ..ops.sparse import constrained_matching_pursuit, ksvd
 from ._base import Progress, TextureSynthesizer
+from ._memory import _dims, _output_bytes, _pixels
 from ..errors import InputError
 from ..ops.linalg import matmul
 
@@ -194,7 +195,6 @@ class ConstrainedSparse(TextureSynthesizer):
     summary = "Constrained sparse synthesis: learned dictionary, atom frequencies, graph cuts"
     reference = "Tartavel, Gousseau, Peyre, SSVM 2013"
     has_source_map = False
-    bytes_per_pixel = 400.0
 
     def __init__(
         self,
@@ -326,6 +326,47 @@ class ConstrainedSparse(TextureSynthesizer):
             )
         self.scales_ = scales
         self.fit_seconds_ = timings
+
+    # ---------------------------------------------------------------- memory
+    def memory_terms(self, exemplar_shape, output_shape=None) -> dict[str, float]:
+        """Patches and codes of every exemplar patch (fit); codes of the output patches (sample).
+
+        Fitting holds all ``K`` exemplar patches of the finest scale (``K x tau^2 C`` floats),
+        K-SVD's batch OMP on ``ksvd_training`` of them and the constrained matching pursuit
+        of all of them (``n_atoms x K`` correlations and codes); sampling holds the codes of
+        the output patches and the graph-cut reassembly (``docs/memory.md``).
+        """
+        h, w, c = _dims(exemplar_shape)
+        tau, s = self.patch_size, self.sparsity
+        dim = tau * tau * c
+        big = 2 ** (self._scales - 1)
+        hc, wc = (h // big) * big, (w // big) * big
+        kept, fit_peak = 8.0 * h * w * c, 0.0
+        atoms = []
+        for j in range(self._scales):
+            sh, sw = hc >> j, wc >> j
+            k = float(max(0, sh - tau + 1) * max(0, sw - tau + 1))
+            n = self.n_atoms if k >= 2 * self.n_atoms else max(s + 1, int(k) // 2)
+            atoms.append(n)
+            t = min(k, float(self.ksvd_training))
+            ksvd = 64.0 * t * n + 24.0 * dim * t
+            pursuit = 17.0 * n * k + 130.0 * k
+            fit_peak = max(fit_peak, kept + 8.0 * k * dim + max(8.0 * k * dim, ksvd, pursuit))
+            kept += 8.0 * dim * n + 8.0 * k + 16.0 * sh * sw * c * (j > 0) + 8.0 * sh * sw * c
+        terms = {"exemplar scales and dictionaries": kept}
+        if output_shape is None:
+            terms["patches, K-SVD and codes of the exemplar"] = fit_peak - kept
+            return terms
+        canvas = self._canvas(output_shape)
+        pixels = float(canvas[0]) * canvas[1]
+        n = atoms[0]
+        patches = pixels / (self.step * self.step)
+        terms["image, gradient and histogram targets"] = pixels * (56.0 * c + 16.0) + 8.0 * n * n
+        pursuit = 8.0 * patches * dim + 17.0 * n * patches + 130.0 * patches
+        reassembly = 16.0 * patches * dim + 8.0 * n * patches + 80.0 * c * pixels
+        terms["patch codes and reassembly"] = max(pursuit, reassembly)
+        terms["output image"] = _output_bytes(c, output_shape) + 16.0 * c * _pixels(output_shape)
+        return terms
 
     # ---------------------------------------------------------------- sample
     def _canvas(self, shape: tuple[int, int]) -> tuple[int, int]:

@@ -23,6 +23,7 @@ from ..ops import as_channels, crop_to_multiple, rgb_to_yuv, yuv_to_rgb
 from ..ops.dtcwt import DTCWT, DTCWTPyramid
 from ..ops.nonparametric import NonParametricSampler
 from ._base import Progress, TextureSynthesizer
+from ._memory import _dims, _nonparametric_bytes, _output_bytes
 from ..errors import InputError
 
 __all__ = ["ComplexWaveletSampling", "propagate", "block_indices"]
@@ -103,7 +104,6 @@ class ComplexWaveletSampling(TextureSynthesizer):
     reference = "Gallagher, Kokaram, Wavelet based texture synthesis"
     has_source_map = True
     source_map_exact = False
-    bytes_per_pixel = 400.0
 
     def __init__(
         self,
@@ -138,6 +138,38 @@ class ComplexWaveletSampling(TextureSynthesizer):
 
     def _transform(self) -> DTCWT:
         return DTCWT(self.levels, biort=f"near_sym_{self.filters}", qshift=f"qshift_{self.filters}")
+
+    def memory_terms(self, exemplar_shape, output_shape=None) -> dict[str, float]:
+        """DT-CWT pyramids and the windows of the coarsest level; the output's pyramid and maps.
+
+        The filters of length ``m`` are applied by gathering ``m`` shifted copies of an image,
+        and ``refine`` compares ``window^2`` complex neighbourhoods per level-1 position, which
+        dominates large outputs (``docs/memory.md``).
+        """
+        h, w, c = _dims(exemplar_shape)
+        q = 2**self.levels
+        hc, wc = (h // q) * q, (w // q) * q
+        k = float(hc * wc)
+        taps = 19 if self.filters == "b" else 7
+        pyramid = 32.0 * k + 8.0 * k / 4 ** (self.levels - 1)
+        pad = self.window // 2 if self.candidates == "all" else 0
+        top_h, top_w = hc // q + 2 * pad, wc // q + 2 * pad
+        grid = None if output_shape is None else (-(-output_shape[0] // q), -(-output_shape[1] // q))
+        kept, transient = _nonparametric_bytes(top_h, top_w, 12, self.window, grid)
+        terms = {"exemplar pyramids and coarsest windows": 16.0 * k * c + c * pyramid + kept}
+        if output_shape is None:
+            terms["pyramid construction"] = max(8.0 * taps * k + 80.0 * k, transient)
+            return terms
+        full = float(grid[0] * q) * float(grid[1] * q)
+        terms["growth at the coarsest level"] = transient
+        terms["coefficient maps"] = 16.0 * full * (1.0 / 3 + 4.0 / 4**self.levels + 1.5)
+        terms["one output pyramid and its inverse"] = pyramid / k * full + (8.0 * taps + 8.0) * full
+        terms["output planes"] = 8.0 * c * full + _output_bytes(c, output_shape)
+        if self.refine:
+            # per level-1 position (full / 4): template, candidate windows and their
+            # difference, window^2 x 6 complex values each, and two real squares
+            terms["local refinement"] = 84.0 * self.window**2 * full
+        return terms
 
     def _fit(self, exemplar: np.ndarray) -> None:
         ex = crop_to_multiple(as_channels(exemplar), 2**self.levels)

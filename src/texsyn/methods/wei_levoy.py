@@ -31,6 +31,7 @@ import numpy as np
 from .._validation import OneOf, Range
 from ..ops import as_channels, gaussian_pyramid
 from ._base import Progress, TextureSynthesizer
+from ._memory import _dims, _output_bytes, _pixels
 from ..errors import InputError
 from ..ops.linalg import matmul
 
@@ -141,7 +142,6 @@ class WeiLevoy(TextureSynthesizer):
     summary = "Wei-Levoy multiresolution synthesis with causal neighbourhoods"
     reference = "Wei, Levoy, SIGGRAPH 2000"
     has_source_map = True
-    bytes_per_pixel = 200.0
 
     def __init__(
         self,
@@ -169,6 +169,53 @@ class WeiLevoy(TextureSynthesizer):
     def min_exemplar_size(self):
         side = max(2 ** (self.levels - 1) * 2, self.window // 2 + 1)
         return side, f"levels={self.levels} needs at least {side}x{side} pixels"
+
+    def memory_terms(self, exemplar_shape, output_shape=None) -> dict[str, float]:
+        """Neighbourhood banks of every exemplar pixel and level; one wavefront of searches.
+
+        An exact search compares a whole wavefront (about ``width / (window // 2 + 1)``
+        pixels) with every exemplar pixel at once (``docs/memory.md``).
+        """
+        h, w, c = _dims(exemplar_shape)
+        causal = (self.window**2 - 1) // 2
+        parent = self.parent_window**2
+        sizes = [(h, w)]
+        for _ in range(self.levels - 1):
+            sizes.append(((sizes[-1][0] + 1) // 2, (sizes[-1][1] + 1) // 2))
+        kept, peak, dims = 8.0 * h * w * c * 7 / 3, 0.0, []
+        for level, (sh, sw) in enumerate(sizes):  # the finest (largest) level is built first
+            k = float(sh * sw)
+            dim = (causal + (parent if level + 1 < self.levels else 0)) * c
+            dims.append(dim)
+            # the gathered parts, the bank and its squares (for the norms) coexist
+            widest = max(causal, parent)
+            build = max(20.0 * k * dim, 24.0 * k * widest + 8.0 * k * widest * c)
+            if self.search == "tsvq":
+                build = max(build, 40.0 * k * dim)
+            peak = max(peak, kept + 8.0 * k * dim + build)
+            kept += 8.0 * k * dim + 8.0 * k
+            if self.search == "tsvq":
+                kept += 16.0 * k * dim / max(1, self.leaf_size) + 16.0 * k
+        terms = {"exemplar pyramid and neighbourhood banks": kept}
+        if output_shape is None:
+            terms["bank construction"] = max(0.0, peak - kept)
+            return terms
+        oh, ow = output_shape[:2]
+        slope = self.window // 2 + 1
+        front = 0.0
+        out_sizes = [(oh, ow)]
+        for _ in range(self.levels - 1):
+            out_sizes.append(((out_sizes[-1][0] + 1) // 2, (out_sizes[-1][1] + 1) // 2))
+        for level, (sh, sw) in enumerate(out_sizes):
+            n = float(min(sh, -(-sw // slope)))
+            k = float(sizes[level][0] * sizes[level][1])
+            search = 24.0 * n * k if self.search == "exact" else 0.0
+            front = max(front, 24.0 * n * dims[level] + 16.0 * n * max(causal, parent) + search)
+        pixels = _pixels(output_shape)
+        terms["one wavefront of searches"] = front
+        terms["output pyramid and source maps"] = pixels * (4.0 / 3 * 8.0 * c + 16.0 * c + 56.0)
+        terms["output image"] = _output_bytes(c, output_shape)
+        return terms
 
     def _fit(self, exemplar: np.ndarray) -> None:
         ex = as_channels(exemplar)

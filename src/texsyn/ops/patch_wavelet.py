@@ -1,7 +1,8 @@
 """Patch-valued wavelet transform of coordinate maps (Peyré 2007), spec 01.
 
-A feature-valued image is a *coordinate map* ``T`` of shape ``(n, n, 2)``: every sample holds
-the exemplar position ``(row, col)`` of its feature, the exemplar window centred there; the
+A feature-valued image is a *coordinate map* ``T`` of shape ``(n_h, n_w, 2)`` (sides powers of
+two, not necessarily equal): every sample holds the exemplar position ``(row, col)`` of its
+feature, the exemplar window centred there; the
 displayed image is ``E(T)``. The transform is a lifting scheme on such maps (paper section 4,
 Tables 1-2): at level ``j`` the samples spaced ``s = 2^(j-1)`` apart are split into even and
 odd ones along rows, then along columns; each odd sample is predicted by the association-field
@@ -32,7 +33,9 @@ __all__ = [
     "ExemplarWindows",
     "PatchWaveletCoefficients",
     "PatchWaveletTransform",
+    "descriptor_dimension",
     "lle_embedding",
+    "planned_widths",
 ]
 
 
@@ -253,16 +256,17 @@ class PatchWaveletCoefficients:
 
     Attributes
     ----------
-    coarse : ndarray of int64, shape (c, c, 2)
-        Coarse coordinate map at level ``top_level`` (``1 x 1`` after a full forward
-        transform, ``2 x 2`` for a synthesis).
+    coarse : ndarray of int64, shape (c_h, c_w, 2)
+        Coarse coordinate map at level ``top_level``: ``1 x 1`` after a full forward
+        transform of a square map, ``2^a x 2^b`` with ``min(a, b) = 0`` after that of a
+        rectangular one; ``2 x 2`` for a square synthesis.
     top_level : int
-        Coarsest level ``j_top``; the full map has side ``c * 2**top_level``.
+        Coarsest level ``j_top``; the full map has shape ``(c_h 2^j_top, c_w 2^j_top)``.
     details : dict
         ``details[(j, axis)]``, ``j = 1 ... top_level`` (1 is the finest), ``axis`` 0 (vertical
         pairs) or 1 (horizontal pairs): arrays ``(rows, cols, p)`` of detail vectors; a missing
-        entry means zero details. Shapes: ``(n/2^j, n/2^(j-1), p)`` for axis 0 and
-        ``(n/2^j, n/2^j, p)`` for axis 1.
+        entry means zero details. Shapes, for a map of shape ``(n_h, n_w)``:
+        ``(n_h/2^j, n_w/2^(j-1), p)`` for axis 0 and ``(n_h/2^j, n_w/2^j, p)`` for axis 1.
     grid_boundary : {'periodic', 'symmetric'}
         Boundary rule of the sample grid that produced them (the inverse must use the same).
     """
@@ -273,13 +277,21 @@ class PatchWaveletCoefficients:
     grid_boundary: str = "periodic"
 
     @property
+    def shape(self) -> tuple[int, int]:
+        """``(n_h, n_w)``: shape of the coordinate map these coefficients describe."""
+        scale = 2**self.top_level
+        return (self.coarse.shape[0] * scale, self.coarse.shape[1] * scale)
+
+    @property
     def size(self) -> int:
-        """Side ``n`` of the coordinate map these coefficients describe."""
-        return self.coarse.shape[0] * 2**self.top_level
+        """Longest side of the coordinate map (its side ``n`` when it is square)."""
+        return max(self.shape)
 
     def detail_shape(self, level: int, axis: int) -> tuple[int, int]:
-        rows = self.size // 2**level
-        return (rows, 2 * rows) if axis == 0 else (rows, rows)
+        """``(rows, cols)`` of the details of ``(level, axis)``."""
+        rows = self.shape[0] // 2**level
+        cols = self.shape[1] // 2**level
+        return (rows, 2 * cols) if axis == 0 else (rows, cols)
 
     def __getitem__(self, key: tuple[int, int]) -> np.ndarray | None:
         return self.details.get(key)
@@ -316,20 +328,50 @@ class PatchWaveletCoefficients:
     def magnitudes(self) -> np.ndarray:
         """Detail magnitudes packed like an orthogonal wavelet transform (paper Fig. 7).
 
-        Level ``j`` with ``a = n / 2^j`` puts the horizontal-pair magnitudes (``a x a``) in
-        ``[0:a, a:2a]`` and the vertical-pair magnitudes (``a x 2a``) in ``[a:2a, 0:2a]``;
-        the coarse corner stays 0. The result is ``n x n``.
+        Level ``j`` with ``a = n_h / 2^j`` and ``b = n_w / 2^j`` puts the horizontal-pair
+        magnitudes (``a x b``) in ``[0:a, b:2b]`` and the vertical-pair magnitudes
+        (``a x 2b``) in ``[a:2a, 0:2b]``; the coarse corner stays 0. The result has the shape
+        ``(n_h, n_w)`` of the map (``n x n`` for a square one).
         """
-        n = self.size
-        out = np.zeros((n, n))
+        n_h, n_w = self.shape
+        out = np.zeros((n_h, n_w))
         norms = self.norms()
         for level in range(1, self.top_level + 1):
-            a = n // 2**level
+            a, b = n_h // 2**level, n_w // 2**level
             if (level, 1) in norms:
-                out[0:a, a : 2 * a] = norms[(level, 1)]
+                out[0:a, b : 2 * b] = norms[(level, 1)]
             if (level, 0) in norms:
-                out[a : 2 * a, 0 : 2 * a] = norms[(level, 0)]
+                out[a : 2 * a, 0 : 2 * b] = norms[(level, 0)]
         return out
+
+
+def planned_widths(
+    exemplar_shape: tuple[int, ...],
+    *,
+    min_width: int = 8,
+    max_width: int | None = None,
+    feature_width: int | None = None,
+) -> list[int]:
+    """The window widths :meth:`PatchWaveletTransform.widths` will use, from shapes alone.
+
+    For memory estimates made before any array exists (``docs/memory.md``).
+    """
+    h, w = int(exemplar_shape[0]), int(exemplar_shape[1])
+    largest = 2 ** int(math.floor(math.log2(max(min(h, w) // 2, 1))))
+    top = largest if max_width is None else int(min(max_width, largest))
+    low = int(min(min_width, top))
+    feature = int(min(feature_width or min_width, top))
+    out, width = [], max(low, 1)
+    while width <= top:
+        out.append(width)
+        width *= 2
+    return sorted(set(out) | {feature})
+
+
+def descriptor_dimension(width: int, max_resolution: int, channels: int) -> int:
+    """Length of the descriptor of a window of ``width`` (:meth:`ExemplarWindows.dimension`)."""
+    b = max(1, int(width) // int(max_resolution))
+    return (int(width) // b) ** 2 * int(channels)
 
 
 def _split(samples: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray]:
@@ -514,17 +556,21 @@ class PatchWaveletTransform:
     ) -> PatchWaveletCoefficients:
         """Forward transform of an ``n x n`` coordinate map, ``n = 2^J`` (paper Table 1, spec 01 5.1).
 
+        A rectangular map of shape ``(2^a, 2^b)`` is transformed over ``min(a, b)`` levels,
+        which leaves a coarse map of ``2^(a - min) x 2^(b - min)`` features: the cost is
+        proportional to the number of samples, never to the square of the longer side.
+
         Parameters
         ----------
-        coords : ndarray of int, shape (n, n, 2)
+        coords : ndarray of int, shape (n, n, 2) or (n_h, n_w, 2)
+            Sides powers of two, at least 2.
         grid_boundary : {'periodic', 'symmetric'}
             Neighbour rule at the border of the sample grid (spec 01, A13).
         callback : callable, optional
             ``callback(level_done, levels)`` after each level.
         """
         T = self._check_map(coords)
-        n = T.shape[0]
-        levels = int(round(math.log2(n)))
+        levels = int(round(math.log2(min(T.shape[:2]))))
         details = {}
         for level in range(1, levels + 1):
             width = self.width(level)
@@ -544,7 +590,7 @@ class PatchWaveletTransform:
         *,
         callback: Callable[[int, int, np.ndarray], None] | None = None,
     ) -> np.ndarray:
-        """Backward transform (paper Table 2, spec 01 5.2): the ``n x n x 2`` coordinate map.
+        """Backward transform (paper Table 2, spec 01 5.2): the ``coefficients.shape + (2,)`` coordinate map.
 
         Odd samples with an exactly zero detail take the prediction itself (A16), so zero
         details need no embedding; others take ``gamma^-1(gamma(prediction) - d)``.
@@ -604,11 +650,11 @@ class PatchWaveletTransform:
 
     def _check_map(self, coords: np.ndarray) -> np.ndarray:
         T = np.asarray(coords)
-        if T.ndim != 3 or T.shape[2] != 2 or T.shape[0] != T.shape[1]:
-            raise ValueError(f"coordinate map must have shape (n, n, 2), got {T.shape}")
-        n = T.shape[0]
-        if n < 2 or n & (n - 1):
-            raise ValueError(f"coordinate map side must be a power of two >= 2, got {n}")
+        if T.ndim != 3 or T.shape[2] != 2:
+            raise ValueError(f"coordinate map must have shape (n_h, n_w, 2), got {T.shape}")
+        for n in T.shape[:2]:
+            if n < 2 or n & (n - 1):
+                raise ValueError(f"coordinate map sides must be powers of two >= 2, got {T.shape[:2]}")
         h, w = self.exemplar_shape
         if T.min() < 0 or T[..., 0].max() >= h or T[..., 1].max() >= w:
             raise ValueError("coordinate map holds positions outside the exemplar")

@@ -97,7 +97,7 @@ def extract_patches(
     rows = _anchors(h, n, stride, mode)
     cols = _anchors(w, n, stride, mode)
     windows = sliding_window_view(img, (n, n), axis=(0, 1))  # (h', w', C, n, n)
-    windows = windows[rows][:, cols]
+    windows = windows[np.ix_(rows, cols)]  # one copy of the chosen windows only
     patches = np.ascontiguousarray(windows.transpose(0, 1, 3, 4, 2)).reshape(
         len(rows) * len(cols), -1
     )
