@@ -136,3 +136,38 @@ def test_matmul_equals_numpy_and_does_not_depend_on_the_workers(monkeypatch):
     monkeypatch.setattr(linalg, "worker_count", lambda: 1)
     assert np.array_equal(linalg.matmul(a, b), parallel)
     np.testing.assert_allclose(linalg.matmul(a, b[:, 0]), a @ b[:, 0], rtol=1e-12, atol=1e-12)
+
+
+def _product_in_child(queue) -> None:
+    from texsyn.ops.linalg import matmul
+
+    rng = np.random.default_rng(3)
+    a, b = rng.standard_normal((600, 80)), rng.standard_normal((80, 3000))
+    queue.put(bool(np.allclose(matmul(a, b), a @ b)))
+
+
+def test_matmul_works_in_a_process_forked_after_using_it():
+    import multiprocessing
+
+    from texsyn.ops.linalg import matmul
+
+    rng = np.random.default_rng(2)
+    matmul(rng.standard_normal((600, 80)), rng.standard_normal((80, 3000)))  # starts the pool
+    context = multiprocessing.get_context("fork")
+    queue = context.Queue()
+    child = context.Process(target=_product_in_child, args=(queue,))
+    child.start()
+    child.join(60)
+    hung = child.is_alive()
+    if hung:
+        child.kill()
+    assert not hung, "a forked child hangs on the parent's thread pool"
+    assert queue.get(timeout=5) is True
+
+
+def test_matmul_tiles_the_columns_too():
+    from texsyn.ops import linalg
+
+    rng = np.random.default_rng(4)
+    a, b = rng.standard_normal((40, 300)), rng.standard_normal((300, 3 * linalg.BLOCK_COLUMNS + 5))
+    np.testing.assert_allclose(linalg.matmul(a, b), a @ b, rtol=1e-12, atol=1e-12)

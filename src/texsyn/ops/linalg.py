@@ -12,10 +12,10 @@ give the same bytes. texsyn therefore fixes the order of every reduction itself
   function), the BLAS libraries run one thread, so each BLAS or LAPACK call has the
   single-thread reduction order whatever the machine's thread settings;
 - the large products that dominate the run time (patch searches, sparse coding) go
-  through :func:`matmul`, which splits the rows of the left operand into blocks of a fixed
-  size and multiplies the blocks concurrently on a thread pool. Each block is an ordinary
-  single-thread BLAS call, so its bytes depend on the block size only, never on the number
-  of workers: all cores are used and the result is the same with 1, 2 or 64 of them.
+  through :func:`matmul`, which cuts the product into tiles of a fixed shape and multiplies
+  the tiles concurrently on a thread pool. Each tile is an ordinary single-thread BLAS call,
+  so its bytes depend on the tile shape only, never on the number of workers: all cores are
+  used and the result is the same with 1, 2 or 64 of them.
 
 Numba ``prange`` loops in texsyn write independent outputs (no cross-iteration sums), and the
 FFTs (NumPy's pocketfft) are single-threaded, so neither depends on the thread count.
@@ -33,12 +33,14 @@ from typing import Callable, Iterator, TypeVar
 
 import numpy as np
 
-__all__ = ["fixed_order", "matmul", "worker_count", "BLOCK_ROWS"]
+__all__ = ["fixed_order", "matmul", "worker_count", "BLOCK_ROWS", "BLOCK_COLUMNS"]
 
 #: rows of the left operand in one block of :func:`matmul` (part of the rounding contract:
 #: changing it may change results in the last bits)
 BLOCK_ROWS = 256
-#: products smaller than this many multiply-adds are computed in one call
+#: columns of the right operand in one tile of :func:`matmul` (part of the contract too)
+BLOCK_COLUMNS = 2048
+#: products smaller than this many multiply-adds are computed on the calling thread
 _PARALLEL_MIN_WORK = 1 << 22
 
 _lock = threading.Lock()
@@ -146,9 +148,11 @@ def _thread_pool() -> ThreadPoolExecutor:
 def matmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """``a @ b`` for a 2-D ``a``, with rounding independent of the number of threads.
 
-    The rows of ``a`` are cut into blocks of :data:`BLOCK_ROWS`; each block is one
-    single-thread BLAS product, and the blocks run concurrently on a thread pool (BLAS
-    releases the GIL). The bytes of the result depend on the block size only.
+    The product is cut into tiles of :data:`BLOCK_ROWS` rows of ``a`` by
+    :data:`BLOCK_COLUMNS` columns of ``b``; each tile is one single-thread BLAS product, and
+    the tiles are shared among the workers of a thread pool (BLAS releases the GIL). The
+    bytes of the result depend on the tile shape only, never on how many workers there are
+    or which tile each one takes.
 
     Parameters
     ----------
@@ -165,25 +169,37 @@ def matmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         raise ValueError(f"matmul needs a 2-D left operand, got shape {a.shape}")
     m, k = a.shape
     n = 1 if b.ndim == 1 else b.shape[1]
+    column_starts = [0] if b.ndim == 1 else range(0, n, BLOCK_COLUMNS)
+    tiles = [(r, c) for r in range(0, m, BLOCK_ROWS) for c in column_starts]
     with _fixed_order_context():
-        if m <= BLOCK_ROWS or m * k * n < _PARALLEL_MIN_WORK or worker_count() == 1:
-            return _blocked(a, b)
+        if len(tiles) == 1:
+            return a @ b
         out = np.empty((m,) + b.shape[1:], dtype=np.result_type(a, b))
-        starts = range(0, m, BLOCK_ROWS)
 
-        def block(start: int) -> None:
-            np.matmul(a[start : start + BLOCK_ROWS], b, out=out[start : start + BLOCK_ROWS])
+        def run(share: list[tuple[int, int]]) -> None:
+            for r, c in share:
+                rows = slice(r, r + BLOCK_ROWS)
+                if b.ndim == 1:
+                    np.matmul(a[rows], b, out=out[rows])
+                else:
+                    cols = slice(c, c + BLOCK_COLUMNS)
+                    np.matmul(a[rows], b[:, cols], out=out[rows, cols])
 
-        list(_thread_pool().map(block, starts))
+        workers = min(worker_count(), len(tiles)) if m * k * n >= _PARALLEL_MIN_WORK else 1
+        if workers == 1:
+            run(tiles)
+        else:
+            list(_thread_pool().map(run, [tiles[i::workers] for i in range(workers)]))
         return out
 
 
-def _blocked(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The same blocks as the parallel path, computed one after the other."""
-    m = a.shape[0]
-    if m <= BLOCK_ROWS:
-        return a @ b
-    out = np.empty((m,) + b.shape[1:], dtype=np.result_type(a, b))
-    for start in range(0, m, BLOCK_ROWS):
-        np.matmul(a[start : start + BLOCK_ROWS], b, out=out[start : start + BLOCK_ROWS])
-    return out
+def _reset_after_fork() -> None:
+    """In a forked child the pool's threads do not exist: start a new pool and new locks."""
+    global _pool, _lock, _pool_lock
+    _pool = None
+    _lock = threading.Lock()
+    _pool_lock = threading.Lock()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_reset_after_fork)
