@@ -50,6 +50,8 @@ print("modify", digest(modified))
 rng = np.random.default_rng(0)
 a, b = rng.standard_normal((700, 300)), rng.standard_normal((300, 500))
 print("matmul", digest(matmul(a, b)) + digest(matmul(a.astype(np.float32), b.astype(np.float32))))
+from texsyn.metrics import ps_statistics
+print("ps_statistics", digest(ps_statistics(big[..., 0], n_scales=3).vector()))
 """
 
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
@@ -106,7 +108,7 @@ def _name(setting) -> str:
 def test_same_bytes_as_with_the_default_thread_count(hashes, setting):
     kernel, _ = setting
     reference = hashes[(kernel, None)]
-    assert set(reference) == set(texsyn.METHODS) | {"modify", "animate", "matmul"}
+    assert set(reference) == set(texsyn.METHODS) | {"modify", "animate", "matmul", "ps_statistics"}
     differing = sorted(name for name in reference if hashes[setting][name] != reference[name])
     assert not differing, f"{_name(setting)} changes the output of {differing}"
 

@@ -471,9 +471,10 @@ def test_tiff_bombs(tmp_path):
         tracemalloc.stop()
     assert time.monotonic() - start < TIME_LIMIT
     assert peak < 16 << 20
-    # an uncompressed TIFF whose strip is shorter than its header declares
+    # an uncompressed TIFF whose strip is shorter than its header declares (small enough
+    # not to be refused as a decompression bomb first)
     path = tmp_path / "short.tif"
-    path.write_bytes(tiff_image(4000, 4000, 3, 8, 1, bytes(100)))
+    path.write_bytes(tiff_image(400, 400, 3, 8, 1, bytes(100)))
     with pytest.raises(ImageReadError, match="truncated"):
         read_image(path)
 
@@ -591,10 +592,11 @@ _CHILD = textwrap.dedent(
 )
 
 
-def _run_cli(*args: str) -> tuple[int, int, str]:
+def _run_cli(*args: str, env: dict | None = None) -> tuple[int, int, str]:
     """Run ``texsyn ARGS`` in a child, returning its exit status, peak RSS (MiB) and stderr."""
     done = subprocess.run(
-        [sys.executable, "-c", _CHILD, *args], capture_output=True, text=True, timeout=180, check=False
+        [sys.executable, "-c", _CHILD, *args], capture_output=True, text=True, timeout=180, check=False,
+        env=None if env is None else {**os.environ, **env},
     )
     assert done.returncode == 0, done.stderr
     code, peak, stderr = done.stdout.split("\n", 2)
@@ -626,3 +628,83 @@ def test_cli_refuses_a_truncated_ppm_at_once(tmp_path):
     assert time.monotonic() - start < 60
     assert code == 2 and len(stderr.strip().splitlines()) == 1 and "t.ppm" in stderr, stderr
     assert not out.exists()
+
+
+# ------------------------------------------------------------ bombs under the pixel budget
+
+
+def _jpeg_with_declared_size(path, width, height):
+    """A real 64x64 JPEG whose frame header is patched to declare ``width`` x ``height``."""
+    from io import BytesIO
+
+    from PIL import Image
+
+    buffer = BytesIO()
+    rng = np.random.default_rng(5)
+    Image.fromarray((rng.random((64, 64, 3)) * 255).astype(np.uint8)).save(buffer, "JPEG", quality=90)
+    data = bytearray(buffer.getvalue())
+    sof = data.index(b"\xff\xc0")
+    data[sof + 5 : sof + 9] = height.to_bytes(2, "big") + width.to_bytes(2, "big")
+    path.write_bytes(bytes(data))
+    return path
+
+
+@pytest.mark.parametrize("side", [2000, 6000])
+def test_jpeg_whose_header_lies_about_its_size_is_refused_before_decoding(tmp_path, side):
+    path = _jpeg_with_declared_size(tmp_path / "lie.jpg", side, side)
+    start = time.monotonic()
+    with pytest.raises(ImageTooLargeError, match="decompression bomb"):
+        read_image(path)
+    assert time.monotonic() - start < 1.0
+
+
+@pytest.mark.parametrize("fmt", ["PNG", "GIF", "TIFF"])
+def test_small_file_declaring_millions_of_pixels_is_refused_as_a_bomb(tmp_path, fmt):
+    from PIL import Image
+
+    path = tmp_path / f"zeros.{fmt.lower()}"
+    kwargs = {"compression": "tiff_deflate"} if fmt == "TIFF" else {}
+    Image.new("RGB", (3000, 3000)).save(path, fmt, **kwargs)  # 27 MB of zeros in a few KB
+    assert path.stat().st_size * 250 < 3000 * 3000 * 3
+    start = time.monotonic()
+    with pytest.raises(ImageTooLargeError, match="decompression bomb"):
+        read_image(path)
+    assert time.monotonic() - start < 1.0
+
+
+def test_flat_images_below_the_floor_are_read_whatever_their_compression(tmp_path):
+    from PIL import Image
+
+    Image.new("RGB", (500, 500), (10, 200, 30)).save(tmp_path / "flat.png")  # 750 kB in ~1 kB
+    assert read_image(tmp_path / "flat.png").shape == (500, 500, 3)
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="uses the resource module")
+@pytest.mark.parametrize("kind", ["zeros PNG", "lying JPEG"])
+def test_cli_refuses_bombs_under_the_pixel_budget_in_little_memory(tmp_path, kind):
+    if kind == "zeros PNG":
+        bomb = tmp_path / "bomb.png"
+        Image.new("RGB", (6000, 6000)).save(bomb)  # 108 MB of zeros in ~100 kB, 36 of 40 million pixels
+    else:
+        bomb = _jpeg_with_declared_size(tmp_path / "bomb.jpg", 6000, 6000)
+    out = tmp_path / "out.png"
+    code, peak_mib, stderr = _run_cli("synth", str(bomb), "-o", str(out), "--size", "32x32")
+    assert code == 2, stderr
+    lines = stderr.strip().splitlines()
+    assert len(lines) == 1 and "decompression bomb" in lines[0], stderr
+    assert not out.exists()
+    assert peak_mib < 300, f"peak RSS {peak_mib} MiB"
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="uses the resource module")
+def test_cli_checks_the_memory_limit_from_the_header_before_decoding(tmp_path):
+    # 3500x3500 RGB, uncompressed: decoding it (37 MB) and its float32 copy (147 MB) on top of
+    # the ~130 MB start-up would pass 300 MB, so a refusal under 300 MB came before decoding
+    noise = np.random.default_rng(0).integers(0, 256, (3500, 3500, 3), dtype=np.uint8)
+    big = tmp_path / "big.bmp"
+    Image.fromarray(noise).save(big)
+    out = tmp_path / "out.png"
+    code, peak_mib, stderr = _run_cli("synth", str(big), "-o", str(out), "-m", "patch_wavelet", env={"TEXSYN_MEMORY_LIMIT": "64M"})
+    assert code == 2 and "TEXSYN_MEMORY_LIMIT" in stderr, stderr
+    assert not out.exists()
+    assert peak_mib < 300, f"peak RSS {peak_mib} MiB"

@@ -38,7 +38,7 @@ import numpy as np
 
 from . import __version__, data
 from .errors import InputError, InputFileNotFoundError, OutputWriteError
-from .io import OutputSet, read_image, sidecar_path
+from .io import OutputSet, check_image_size, max_image_pixels, read_image, read_image_header, sidecar_path
 from .io.writing import ARRAY_FORMATS, JSON_FORMATS, VIDEO_FORMATS, WRITE_FORMATS
 from .methods import METHODS, Progress, SynthesisResult, get_method, make_method
 from .ops import position_colors
@@ -146,7 +146,7 @@ class _Number(click.ParamType):
         too_high = self.high is not None and x > self.high
         if too_low or too_high:
             self.fail(f"must be {'in ' if self.high is not None and self.low is not None else ''}{self.describe()}, got {value!r}", param, ctx)
-        return x
+        return x + 0.0  # -0.0 becomes 0.0
 
 
 _SIZE_RE = re.compile(r"\s*([0-9]+)\s*[xX×]\s*([0-9]+)\s*")
@@ -243,6 +243,29 @@ def _read_flow(path: str) -> np.ndarray:
     if picture.ndim != 3:
         raise InputError(f"flow image '{path}' must be a colour image (red = row, green = column component)")
     return 2.0 * picture[..., :2].astype(np.float64) - 1.0
+
+
+def _planned_shape(exemplar: str | None) -> tuple[int, ...] | None:
+    """The exemplar's array shape from an image file's header, before any pixel is decoded
+    (``None`` for a built-in exemplar); ``TEXSYN_MAX_PIXELS`` is validated either way."""
+    max_image_pixels()
+    if exemplar is None or exemplar.startswith(BUILTIN_PREFIX):
+        return None
+    header = read_image_header(exemplar)
+    check_image_size(header, exemplar, file_size=os.path.getsize(exemplar))  # the file's own limits first
+    return (header.height, header.width) + ((3,) if header.channels >= 3 else ())
+
+
+def _check_memory_before_reading(method, exemplar: str | None, output_shape=None, scale=None) -> None:
+    """Refuse work over ``TEXSYN_MEMORY_LIMIT`` from the file's header, before decoding it
+    (``docs/memory.md``); ``scale`` derives the output shape from the exemplar's."""
+    planned = _planned_shape(exemplar)
+    if planned is None:
+        return
+    if output_shape is None:
+        factor = 2.0 if scale is None else float(scale)
+        output_shape = (max(1, round(planned[0] * factor)), max(1, round(planned[1] * factor)))
+    method.check_memory_for(planned, output_shape)
 
 
 def _load_exemplar(exemplar: str | None) -> tuple[np.ndarray, str]:
@@ -371,6 +394,7 @@ def synth(exemplar, output, method, size, scale, seed, params, source_map, bit_d
     side_path = outputs.claim(sidecar_path(out_path), formats=JSON_FORMATS, what="sidecar")
 
     flow = _read_flow(flow_file) if flow_file is not None else None
+    _check_memory_before_reading(synthesizer, exemplar, flow.shape[:2] if flow is not None else size, scale)
     image, label = _load_exemplar(exemplar)
     if flow is not None:
         shape = flow.shape[:2]
@@ -444,6 +468,7 @@ def modify(input_image, exemplar, ratio, output, magnitudes, source_map, no_equa
     map_path = _claim_extra(outputs, source_map, "source map")
     side_path = outputs.claim(sidecar_path(out_path), formats=JSON_FORMATS, what="sidecar")
 
+    _check_memory_before_reading(method, exemplar, _planned_shape(input_image))
     texture, _ = _load_exemplar(input_image)
     image, label = _load_exemplar(exemplar)
     bar = _ProgressBar("modify", enabled=not quiet)
@@ -509,6 +534,7 @@ def animate(exemplar, output, frames, fps, viscosity, size, seed, loop, params, 
         out_path = outputs.claim(out_name, folder=True, what="frame folder")
     side_path = outputs.claim(sidecar_path(out_path), formats=JSON_FORMATS, what="sidecar")
 
+    _check_memory_before_reading(method, exemplar, size, scale=1.0)
     image, label = _load_exemplar(exemplar)
     shape = size
     seed, drawn = _seed(seed)

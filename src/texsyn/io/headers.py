@@ -65,6 +65,16 @@ DEFAULT_MAX_PIXELS = 40_000_000
 #: plus its float32 copy (16 bytes). The memory budget is this times the pixel budget.
 REFERENCE_BYTES_PER_PIXEL = 20
 
+#: Largest ratio of decoded bytes (samples as stored) to file bytes accepted for an image
+#: that decodes to more than :data:`COMPRESSION_FLOOR_BYTES`. Photographed and scanned
+#: textures compress 1:1 to about 20:1 (the 32 development exemplars: 1.0 to 98, the 98 a
+#: synthetic checkerboard); a small file that declares a large image is a decompression bomb
+#: (or a lying header that a decoder would pad with grey), refused before decoding.
+MAX_COMPRESSION_RATIO = 250
+
+#: Images that decode to at most this many bytes are accepted whatever their compression.
+COMPRESSION_FLOOR_BYTES = 1 << 20
+
 #: A PNM header (magic, comments, sizes) longer than this is refused.
 _MAX_PNM_HEADER = 64 * 1024
 
@@ -160,7 +170,11 @@ def _human_bytes(n: float) -> str:
 
 
 def check_image_size(
-    header: ImageHeader, path: str | os.PathLike | None = None, *, max_pixels: int | None = None
+    header: ImageHeader,
+    path: str | os.PathLike | None = None,
+    *,
+    max_pixels: int | None = None,
+    file_size: int | None = None,
 ) -> None:
     """Refuse an image whose declared size exceeds the pixel budget or its memory equivalent.
 
@@ -172,13 +186,18 @@ def check_image_size(
         The file, named in the message.
     max_pixels : int, optional
         The budget; by default :func:`max_image_pixels` (``TEXSYN_MAX_PIXELS``).
+    file_size : int, optional
+        The file's length in bytes; when given, an image that decodes to more than
+        :data:`COMPRESSION_FLOOR_BYTES` and more than :data:`MAX_COMPRESSION_RATIO` times the
+        file's length is refused as a decompression bomb.
 
     Raises
     ------
     ImageTooLargeError
         ``width * height`` exceeds the budget, or the decoded samples plus their float32
         copy would need more than ``20 * budget`` bytes (what an 8-bit RGBA image at the
-        budget needs), e.g. a 16-bit RGBA image above 5/6 of the budget.
+        budget needs), e.g. a 16-bit RGBA image above 5/6 of the budget; or, with
+        ``file_size``, the file is a decompression bomb (see ``file_size``).
     InputError
         ``TEXSYN_MAX_PIXELS`` is not a valid value.
     """
@@ -189,6 +208,12 @@ def check_image_size(
         raise ImageTooLargeError(
             f"'{name}' declares {size} pixels ({_amount(header.pixels)}), more than the "
             f"{_amount(budget)} allowed; set {MAX_PIXELS_ENV}={_suggest(header.pixels)} to allow it"
+        )
+    stored = header.pixels * header.channels * header.bytes_per_sample
+    if file_size is not None and stored > max(COMPRESSION_FLOOR_BYTES, MAX_COMPRESSION_RATIO * file_size):
+        raise ImageTooLargeError(
+            f"'{name}' declares {size} pixels in {file_size} bytes, over {MAX_COMPRESSION_RATIO}:1: "
+            "refused as a decompression bomb (a real image may be saved uncompressed, e.g. BMP)"
         )
     memory = REFERENCE_BYTES_PER_PIXEL * budget
     if header.decoded_bytes > memory:

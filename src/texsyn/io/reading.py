@@ -94,7 +94,7 @@ def read_image(path: str | os.PathLike, *, keep_alpha: bool = False) -> np.ndarr
         ``TEXSYN_MAX_PIXELS`` holds a value that is not a positive number of pixels.
     """
     probe = _probe(path)
-    check_image_size(probe.header, path, max_pixels=max_image_pixels())
+    check_image_size(probe.header, path, max_pixels=max_image_pixels(), file_size=os.path.getsize(path))
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # decoders' warnings (EXIF, palettes) are not the user's concern

@@ -346,6 +346,25 @@ class TextureSynthesizer:
         terms = self.memory_terms(tuple(exemplar_shape), out)
         return int(np.ceil(self._memory_total(terms)))
 
+    def check_memory_for(
+        self, exemplar_shape: tuple[int, ...], output_shape: tuple[int, int] | None = None
+    ) -> None:
+        """Refuse, before any data is read, work that would exceed ``TEXSYN_MEMORY_LIMIT``.
+
+        For front doors that know the shapes first (the command line reads an image file's
+        header before its pixels): checks fitting an exemplar of ``exemplar_shape`` and, when
+        ``output_shape`` is given, sampling that size from it.
+
+        Raises
+        ------
+        MemoryLimitError
+            The estimate (:meth:`estimate_memory`) exceeds the limit.
+        """
+        self._check_params()
+        self._check_memory(tuple(exemplar_shape))
+        if output_shape is not None:
+            self._check_memory(tuple(exemplar_shape), tuple(int(v) for v in tuple(output_shape)[:2]))
+
     def _memory_total(self, terms: dict[str, float]) -> float:
         """:attr:`memory_margin` times the terms, plus 1 MiB of small arrays and objects."""
         return self.memory_margin * float(sum(terms.values())) + 2.0**20

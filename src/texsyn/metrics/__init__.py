@@ -19,6 +19,7 @@ from .patches import (
     source_map_regions,
     synthesis_map,
 )
+from ..ops.linalg import fixed_order
 from .statistics import ps_distance, ps_statistics
 from .texture import (
     histogram_distance,
@@ -63,6 +64,7 @@ METRIC_DESCRIPTIONS = {
 }
 
 
+@fixed_order
 def evaluate(
     image, exemplar, *, patch_size: int = PATCH_SIZE, field: NearestPatchField | None = None
 ) -> dict[str, float]:

@@ -6,12 +6,14 @@ import numpy as np
 
 from .._validation import as_exemplar
 from ..ops.portilla import PSStatistics, max_scales
+from ..ops.linalg import fixed_order
 from ..ops.portilla import ps_statistics as _ps_statistics
 from .texture import check_pair
 
 __all__ = ["ps_distance", "ps_statistics"]
 
 
+@fixed_order
 def ps_statistics(image, *, n_scales: int = 4, n_orientations: int = 4, lags: int = 3) -> PSStatistics:
     """Portilla-Simoncelli statistics of a grey or colour image, as a texture descriptor.
 
@@ -25,6 +27,7 @@ def ps_statistics(image, *, n_scales: int = 4, n_orientations: int = 4, lags: in
     return _ps_statistics(img, n_scales=scales, n_orientations=n_orientations, lags=lags)
 
 
+@fixed_order
 def ps_distance(image, exemplar, *, n_scales: int = 4, n_orientations: int = 4, lags: int = 3) -> float:
     """Relative distance between the Portilla-Simoncelli statistics of two textures.
 

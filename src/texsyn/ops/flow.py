@@ -242,7 +242,7 @@ def builtin_flow(name: str, shape: tuple[int, int]) -> np.ndarray:
     if key.startswith("constant"):
         _, _, text = key.partition(":")
         try:
-            degrees = float(text) if text else 0.0
+            degrees = float(text) if text else (0.0 if key == "constant" else math.nan)  # 'constant:' names no angle
         except ValueError:
             degrees = math.nan
         if key[len("constant"):][:1] not in ("", ":") or not math.isfinite(degrees):
