@@ -8,7 +8,15 @@ from __future__ import annotations
 
 import numpy as np
 
+import texsyn
 from texsyn.ops import SteerablePyramid, as_channels, periodic_smooth_decomposition
+
+#: the exemplar of the classic and statistical strength tests: a 40x40 crop of gravel at low
+#: contrast, so that no method needs to clip (the DT-CWT reconstruction is compared exactly)
+GRAVEL = (0.15 + 0.7 * texsyn.data.exemplar("gravel", size=40)).astype(np.float32)
+#: their output size and seeds
+SHAPE = (48, 48)
+SEEDS = (0, 1, 2)
 
 
 def coherent_fraction(source_map: np.ndarray) -> float:

@@ -13,7 +13,8 @@ import functools
 import numpy as np
 import pytest
 from conftest import FAST_PARAMS
-from strength_utils import coherent_fraction
+from strength_utils import GRAVEL as EXEMPLAR
+from strength_utils import SEEDS, SHAPE, coherent_fraction
 
 import texsyn
 from texsyn.methods.wavelet_sampling import block_indices, propagate
@@ -22,10 +23,6 @@ from texsyn.ops import as_channels, extract_patches
 from texsyn.ops.dtcwt import DTCWT
 from texsyn.ops.sparse import batch_omp
 
-#: low contrast, so that no method needs to clip (the DT-CWT reconstruction is compared exactly)
-EXEMPLAR = (0.15 + 0.7 * texsyn.data.exemplar("gravel", size=40)).astype(np.float32)
-SHAPE = (48, 48)
-SEEDS = (0, 1, 2)
 COPY_METHODS = ("quilting", "efros_leung", "wei_levoy", "cwt")
 
 

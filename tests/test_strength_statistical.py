@@ -14,15 +14,13 @@ import functools
 import numpy as np
 import pytest
 from conftest import FAST_PARAMS
-from strength_utils import band_log2_ratios
+from strength_utils import GRAVEL as EXEMPLAR
+from strength_utils import SEEDS, SHAPE, band_log2_ratios
 
 import texsyn
 from texsyn.metrics import ps_statistics, spectrum_distance
 from texsyn.ops import periodic_smooth_decomposition
 
-EXEMPLAR = (0.15 + 0.7 * texsyn.data.exemplar("gravel", size=40)).astype(np.float32)
-SHAPE = (48, 48)
-SEEDS = (0, 1, 2)
 
 
 @functools.cache
