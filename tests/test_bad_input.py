@@ -396,3 +396,12 @@ def test_fuzzed_option_values_exit_0_or_2_never_a_traceback(tmp_path, monkeypatc
     assert "Traceback" not in text and "internal error" not in text
     assert len(text.strip().splitlines()) <= 1, text
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+def test_an_empty_file_name_is_a_missing_file_not_the_current_folder(tmp_path, capsys):
+    from texsyn.cli import main
+
+    code = main(["synth", "", "-o", str(tmp_path / "o.png")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "no such file" in err[0], err
+    assert not any(tmp_path.iterdir())

@@ -267,6 +267,8 @@ def _said(exc: BaseException, path: str | os.PathLike) -> str:
 def _open_checked(path: str | os.PathLike) -> tuple[BinaryIO, int]:
     """Open a regular file for reading; refuse missing files, folders and special files
     (a pipe is never opened, so that a read cannot block)."""
+    if not os.fspath(path):  # Path("") is the current folder
+        raise InputFileNotFoundError("no such file: '' (an empty file name)")
     p = Path(path)
     try:
         st = p.stat()
