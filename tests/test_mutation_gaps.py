@@ -4,7 +4,10 @@ Each test states a property of the algorithm that the method's own tests did not
 (found by ``python benchmarks/mutation.py``): the K-SVD rule for unused atoms, the terms of
 the sparse energy, colour and non-square outputs of the sparse synthesis, the local
 refinement of the DT-CWT sampling, and for the grouplets the named flows, the structure
-tensor's coherence, ``rescale_speed`` and the looped animation.
+tensor's coherence, ``rescale_speed``, the looped animation, the default time step, ``sigma``,
+``orient_field``'s start and the periodic initial flow; for the patch-valued wavelets
+``random_state``, ``max_resolution``, the window widths, the minimum exemplar, the coordinate-map
+bounds and LLE's neighbour-graph repair.
 """
 
 from __future__ import annotations
@@ -277,3 +280,162 @@ def test_structure_tensor_coherence_is_one_on_stripes_and_low_on_noise():
     np.testing.assert_allclose(np.abs(orientation @ np.array([1.0, -1.0])) / np.sqrt(2), 1.0, atol=1e-6)
     _, noisy = structure_tensor_orientation(np.random.default_rng(0).standard_normal((48, 48)))
     assert 0.0 < noisy.mean() < 0.2
+
+
+# ----------------------------------------------------------------------------- grouplets (2)
+def test_grouplets_default_time_step_is_one_half():
+    """The documented default ``tau = 0.5``: an animation with the default equals one with
+    ``tau=0.5`` and differs from one with another step (so the step shows in the frames)."""
+    rng = np.random.default_rng(2)
+    exemplar = ndimage.gaussian_filter(rng.random((16, 16)), 1.0, mode="wrap")
+    params = dict(colour="grey", n_iterations=1, levels=1, grouplet_levels=1, n_projections=0, speed=3.0)
+
+    def frames(**extra):
+        method = texsyn.make_method("grouplets", **params, **extra).fit(exemplar)
+        return [f.image for f in method.animate(2, rng=7)]
+
+    default, half, other = frames(), frames(tau=0.5), frames(tau=1.5)
+    np.testing.assert_array_equal(default[1], half[1])
+    assert np.abs(default[1] - other[1]).max() > 1e-3
+
+
+def test_grouplets_sigma_sets_the_structure_tensor_smoothing_of_the_model():
+    """``sigma`` is the structure tensor's integration scale: on white noise a wider window
+    averages more isotropic gradients, so the learned coherence falls as sigma grows, and the
+    model's geometry is the one of ``structure_tensor_orientation`` at that sigma."""
+    from texsyn.ops import periodic_smooth_decomposition
+
+    exemplar = np.random.default_rng(4).random((32, 32))
+    coherence = {}
+    for sigma in (1.0, 8.0):
+        method = texsyn.make_method("grouplets", colour="grey", sigma=sigma, **FAST_PARAMS["grouplets"]).fit(exemplar)
+        periodic = periodic_smooth_decomposition(exemplar.astype(np.float64))[0]
+        _, expected = structure_tensor_orientation(periodic, sigma=sigma, presmooth=1.0)
+        np.testing.assert_allclose(method.model_.coherence, expected, atol=1e-9)
+        coherence[sigma] = method.model_.coherence.mean()
+    assert coherence[8.0] < 0.5 * coherence[1.0]
+
+
+def test_orient_field_takes_the_sign_of_its_start_vector():
+    """A constant orientation with random signs becomes one direction everywhere: the one of
+    the vector at ``start`` (the propagation never flips its start)."""
+    from texsyn.ops.flow import orient_field
+
+    rng = np.random.default_rng(0)
+    signs = rng.choice([-1.0, 1.0], size=(12, 10))
+    signs[0, 0], signs[6, 5] = 1.0, -1.0  # (6, 5) is the centre, the default start
+    direction = np.array([0.6, 0.8])
+    orientation = signs[..., None] * direction
+    np.testing.assert_allclose(orient_field(orientation, start=(0, 0)), np.broadcast_to(direction, orientation.shape))
+    np.testing.assert_allclose(orient_field(orientation), np.broadcast_to(-direction, orientation.shape))
+    np.testing.assert_allclose(orient_field(orientation, start=(6, 5)), np.broadcast_to(-direction, orientation.shape))
+
+
+def test_grouplets_random_initial_flow_is_periodic():
+    """``initial_flow='noise'``: smoothed noise on the torus (the fluid solver is periodic),
+    so across the wrap-around edge the flow changes no more than between neighbouring rows or
+    columns inside; it is divergence-free at RMS ``speed``."""
+    from texsyn.ops.fluid import divergence
+
+    method = texsyn.make_method("grouplets", initial_flow="noise", speed=1.5)
+    for seed in range(3):
+        v = method.initial_velocity((32, 24), np.random.default_rng(seed))
+        assert np.abs(v[0] - v[-1]).max() <= np.abs(np.diff(v, axis=0)).max()
+        assert np.abs(v[:, 0] - v[:, -1]).max() <= np.abs(np.diff(v, axis=1)).max()
+        np.testing.assert_allclose(np.sqrt(np.mean(np.sum(v**2, axis=-1))), 1.5)
+        assert np.abs(divergence(v)).max() < 1e-6 * np.abs(v).max()
+
+
+# ----------------------------------------------------------------------------- patch_wavelet
+def test_patch_wavelet_random_state_seeds_the_embedding():
+    """``random_state`` seeds the LLE eigen-solver (ARPACK above 512 positions): the same
+    state gives the same embedding, another one an embedding of the same manifold whose
+    coordinates may differ (here: by their signs)."""
+    exemplar = texsyn.data.exemplar("brick", size=40)  # 1600 positions: ARPACK
+
+    def embedding(state):
+        return texsyn.make_method("patch_wavelet", random_state=state).fit(exemplar).transform_.embedding(8)[0]
+
+    first, again, other = embedding(0), embedding(0), embedding(1)
+    np.testing.assert_array_equal(first, again)
+    assert not np.allclose(first, other)
+    np.testing.assert_allclose(np.abs(np.sum(first * other, axis=0)) / first.shape[0], 1.0, atol=1e-3)
+
+
+def test_patch_wavelet_max_resolution_sets_the_block_means_of_wide_windows():
+    """``max_resolution=4``: a window of width 8 is described by its 4x4 means of 2x2 blocks
+    (16 values per channel, not 64), the means of the full 8x8 window's blocks."""
+    from texsyn.ops.patch_wavelet import ExemplarWindows
+
+    exemplar = texsyn.data.exemplar("brick", size=32)
+    transform = texsyn.make_method("patch_wavelet", max_resolution=4, exemplar_boundary="periodic").fit(exemplar).transform_
+    assert transform.windows.dimension(8) == 16
+    rows, cols = np.array([0, 5, 31]), np.array([3, 17, 30])
+    coarse = transform.windows.descriptors(rows, cols, 8)
+    full = ExemplarWindows(exemplar, "periodic", max_resolution=8).descriptors(rows, cols, 8)
+    assert coarse.shape == (3, 16) and full.shape == (3, 64)
+    blocks = full.reshape(3, 4, 2, 4, 2).mean(axis=(2, 4)).reshape(3, 16)
+    np.testing.assert_allclose(coarse, blocks, atol=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("min_width", "max_width", "expected"),
+    [(2, None, [2, 4, 8, 16, 32, 32]), (8, None, [8, 8, 8, 16, 32, 32]), (2, 16, [2, 4, 8, 16, 16, 16])],
+)
+def test_patch_wavelet_window_width_doubles_per_level_between_its_bounds(min_width, max_width, expected):
+    """Level j uses ``clamp(2^j, min_width, max_width)``, max_width at most half the exemplar."""
+    from texsyn.ops.patch_wavelet import PatchWaveletTransform
+
+    transform = PatchWaveletTransform(texsyn.data.exemplar("brick", size=64), min_width=min_width, max_width=max_width)
+    assert [transform.width(level) for level in range(1, 7)] == expected
+
+
+@pytest.mark.parametrize(("min_width", "feature_width", "side"), [(8, 8, 16), (16, 8, 32), (4, 8, 8)])
+def test_patch_wavelet_minimum_exemplar_is_two_patch_widths(min_width, feature_width, side):
+    """The smallest exemplar holds two patches of ``min_width`` (and one feature window):
+    an exemplar of that side is fitted, one pixel less is refused."""
+    exemplar = texsyn.data.exemplar("brick", size=32)
+    method = texsyn.make_method("patch_wavelet", min_width=min_width, feature_width=feature_width)
+    assert method.min_exemplar_size()[0] == side
+    method.fit(exemplar[:side, :side])
+    with pytest.raises(InputError, match="too small"):
+        method.fit(exemplar[: side - 1, : side - 1])
+
+
+def test_patch_wavelet_coordinate_map_must_stay_inside_the_exemplar():
+    """``forward`` accepts any map of exemplar positions with power-of-two sides >= 2 (a 2x2
+    map and a 2x4 map at the exemplar's last row and column included) and refuses a map with a
+    row or (alone) a column outside the exemplar, or a side that is not a power of two."""
+    exemplar = texsyn.data.exemplar("brick", size=16)
+    transform = texsyn.make_method("patch_wavelet", min_width=2, embedding_dim=2).fit(exemplar).transform_
+    h, w = transform.exemplar_shape
+    inside = np.array([[[0, 0], [h - 1, w - 1]], [[3, w - 1], [h - 1, 0]]])
+    transform.forward(inside)
+    transform.forward(np.concatenate([inside, inside[:, ::-1]], axis=1))
+    for bad in ((0, w), (h, 0), (-1, 0), (0, -1)):
+        coords = inside.copy()
+        coords[1, 1] = bad
+        with pytest.raises(ValueError, match="outside the exemplar"):
+            transform._check_map(coords)
+    with pytest.raises(ValueError, match="powers of two"):
+        transform._check_map(np.zeros((3, 4, 2), dtype=int))
+    with pytest.raises(ValueError, match="powers of two"):
+        transform._check_map(np.zeros((1, 4, 2), dtype=int))
+
+
+def test_lle_grows_the_neighbourhood_until_the_graph_is_connected():
+    """Two far-apart triples and ``n_neighbors=2``: the 2-NN graph has two parts, so LLE
+    enlarges the neighbourhood (by 4, capped at n - 1 = 5) until it is connected, says so,
+    and its 1-D embedding separates the triples."""
+    from texsyn.ops.patch_wavelet import lle_embedding
+
+    rng = np.random.default_rng(0)
+    X = np.concatenate([rng.normal(0.0, 0.1, (3, 4)), rng.normal(5.0, 0.1, (3, 4))])
+    with pytest.warns(UserWarning, match=r"needed 5 neighbours \(not 2\) to be connected"):
+        Y = lle_embedding(X, (2, 3), n_components=1, n_neighbors=2)
+    assert Y.shape == (6, 1) and np.all(np.isfinite(Y))
+    assert np.sign(Y[:3, 0]).tolist() == [np.sign(Y[0, 0])] * 3
+    assert np.sign(Y[3:, 0]).tolist() == [-np.sign(Y[0, 0])] * 3
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # connected from the start: no enlargement
+        lle_embedding(X, (2, 3), n_components=1, n_neighbors=5)
