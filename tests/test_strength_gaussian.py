@@ -107,7 +107,7 @@ def test_paper_parameters_keep_the_exemplars_sharpness(name):
 
 
 def seed_patch_of(exemplar, seed, n=10):
-    """The exemplar patch at the seed anchor t0, the first draw of the rng (spec 05, 4.8)."""
+    """The exemplar patch at the seed anchor t0, the first draw of the rng (the first patch of the raster loop)."""
     t0 = int(np.random.default_rng(seed).integers((exemplar.shape[0] - n + 1) * (exemplar.shape[1] - n + 1)))
     i, j = np.unravel_index(t0, (exemplar.shape[0] - n + 1, exemplar.shape[1] - n + 1))
     return exemplar[i : i + n, j : j + n]

@@ -590,7 +590,7 @@ class PatchWaveletTransform:
         *,
         callback: Callable[[int, int, np.ndarray], None] | None = None,
     ) -> np.ndarray:
-        """Backward transform (paper Table 2, spec 01 5.2): the ``coefficients.shape + (2,)`` coordinate map.
+        """Backward transform (paper Table 2): the ``coefficients.shape + (2,)`` coordinate map.
 
         Odd samples with an exactly zero detail take the prediction itself (A16), so zero
         details need no embedding; others take ``gamma^-1(gamma(prediction) - d)``.
