@@ -223,6 +223,21 @@ def check_header(path: Path) -> None:
     assert time.monotonic() - start < TIME_LIMIT
 
 
+def _refused_in_bounded_memory(path, error, match=None, *, peak_limit=16 << 20) -> str:
+    """Read ``path``: it must raise ``error`` within the time limit and peak traced memory."""
+    tracemalloc.start()
+    start = time.monotonic()
+    try:
+        with pytest.raises(error, match=match) as info:
+            read_image(path)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert time.monotonic() - start < TIME_LIMIT
+    assert peak < peak_limit
+    return str(info.value)
+
+
 # --------------------------------------------------------------------------- valid samples
 
 
@@ -408,17 +423,7 @@ def test_png_bomb_refused_before_decoding(tmp_path, monkeypatch):
         raise AssertionError("decoding started")
 
     monkeypatch.setattr(reading, "_decode", no_decoding)
-    tracemalloc.start()
-    start = time.monotonic()
-    try:
-        with pytest.raises(ImageTooLargeError) as info:
-            read_image(path)
-        peak = tracemalloc.get_traced_memory()[1]
-    finally:
-        tracemalloc.stop()
-    assert time.monotonic() - start < TIME_LIMIT
-    assert peak < 4 << 20
-    message = str(info.value)
+    message = _refused_in_bounded_memory(path, ImageTooLargeError, peak_limit=4 << 20)
     assert "bomb.png" in message and "30000x30000" in message and "TEXSYN_MAX_PIXELS" in message
     assert "40 million" in message and "\n" not in message
 
@@ -437,16 +442,7 @@ def test_png_whose_data_inflates_past_its_header(tmp_path):
     """Within the budget, but the compressed data holds 200 MB: refused in bounded memory."""
     path = tmp_path / "lie.png"
     path.write_bytes(png_file(1000, 1000, 8, 0, _deflate_zeros(200 << 20)))
-    tracemalloc.start()
-    start = time.monotonic()
-    try:
-        with pytest.raises(ImageReadError, match="larger than"):
-            read_image(path)
-        peak = tracemalloc.get_traced_memory()[1]
-    finally:
-        tracemalloc.stop()
-    assert time.monotonic() - start < TIME_LIMIT
-    assert peak < 16 << 20
+    _refused_in_bounded_memory(path, ImageReadError, "larger than")
 
 
 def test_tiff_bombs(tmp_path):
@@ -461,16 +457,7 @@ def test_tiff_bombs(tmp_path):
     # within the budget, but its strip inflates to 200 MB (tifffile would inflate it at once)
     path = tmp_path / "lie.tif"
     path.write_bytes(tiff_image(500, 500, 3, 16, 8, _deflate_zeros(200 << 20)))
-    tracemalloc.start()
-    start = time.monotonic()
-    try:
-        with pytest.raises(ImageReadError, match="inflate"):
-            read_image(path)
-        peak = tracemalloc.get_traced_memory()[1]
-    finally:
-        tracemalloc.stop()
-    assert time.monotonic() - start < TIME_LIMIT
-    assert peak < 16 << 20
+    _refused_in_bounded_memory(path, ImageReadError, "inflate")
     # an uncompressed TIFF whose strip is shorter than its header declares (small enough
     # not to be refused as a decompression bomb first)
     path = tmp_path / "short.tif"
