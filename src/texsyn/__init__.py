@@ -7,11 +7,10 @@
 
 from __future__ import annotations
 
-from importlib.metadata import PackageNotFoundError, version
-
 import numpy as np
 
 from . import data
+from ._version import __version__
 from .methods import (
     METHODS,
     Frame,
@@ -23,10 +22,6 @@ from .methods import (
     make_method,
 )
 
-try:
-    __version__ = version("texsyn")
-except PackageNotFoundError:  # pragma: no cover - running from a source tree
-    __version__ = "0.0.0+unknown"
 
 __all__ = [
     "animate",

@@ -254,13 +254,13 @@ def check_memory(need: float, *, what: str, advice: str) -> None:
     env = os.environ.get(MEMORY_LIMIT_VARIABLE, "").strip()
     source = f"{MEMORY_LIMIT_VARIABLE}={env}" if env else f"default: half the RAM; {MEMORY_LIMIT_VARIABLE} is unset"
     raise MemoryLimitError(
-        f"{what} would need about {_human_bytes(need)} of memory, more than the limit of "
-        f"{_human_bytes(limit)} ({source}); {advice}, or set {MEMORY_LIMIT_VARIABLE} to at "
+        f"{what} would need about {human_bytes(need)} of memory, more than the limit of "
+        f"{human_bytes(limit)} ({source}); {advice}, or set {MEMORY_LIMIT_VARIABLE} to at "
         f"least {_suggest_size(need)} (docs/memory.md)"
     )
 
 
-def _human_bytes(n: float) -> str:
+def human_bytes(n: float) -> str:
     for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
         if n < 1024 or unit == "PiB":
             return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"

@@ -36,7 +36,8 @@ from pathlib import Path
 import click
 import numpy as np
 
-from . import __version__, data
+from . import data
+from ._version import __version__
 from .errors import InputError, InputFileNotFoundError, OutputWriteError
 from .io import OutputSet, check_image_size, max_image_pixels, read_image, read_image_header, sidecar_path
 from .io.writing import ARRAY_FORMATS, JSON_FORMATS, VIDEO_FORMATS, WRITE_FORMATS

@@ -36,6 +36,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import BinaryIO
 
+from .._validation import human_bytes
 from ..errors import (
     ImageReadError,
     ImageTooLargeError,
@@ -161,14 +162,6 @@ def max_image_pixels() -> int:
     return value
 
 
-def _human_bytes(n: float) -> str:
-    for unit in ("B", "KiB", "MiB", "GiB", "TiB"):
-        if n < 1024 or unit == "TiB":
-            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
-        n /= 1024
-    return f"{n:.1f} TiB"  # pragma: no cover
-
-
 def check_image_size(
     header: ImageHeader,
     path: str | os.PathLike | None = None,
@@ -220,7 +213,7 @@ def check_image_size(
         need = -(-header.decoded_bytes // REFERENCE_BYTES_PER_PIXEL)
         raise ImageTooLargeError(
             f"'{name}' declares {size} pixels of {header.channels}x{header.bit_depth} bits: "
-            f"{_human_bytes(header.decoded_bytes)} to decode, more than the {_human_bytes(memory)} "
+            f"{human_bytes(header.decoded_bytes)} to decode, more than the {human_bytes(memory)} "
             f"{MAX_PIXELS_ENV}={budget} allows; set it to {_suggest(need)} to allow it"
         )
 

@@ -21,14 +21,14 @@ import numpy as np
 from .._validation import (
     OneOf,
     Range,
-    _human_bytes,
+    human_bytes,
     as_exemplar,
     check_memory,
     check_output_shape,
     normalize_rng,
 )
 from ..errors import InputError, InputTypeError
-from ._memory import _dims, _pixels
+from ._memory import dims, pixels
 from ..ops.linalg import fixed_order
 
 __all__ = ["ParamSpec", "Progress", "SynthesisResult", "TextureSynthesizer"]
@@ -314,10 +314,10 @@ class TextureSynthesizer:
         -------
         dict of str to float
         """
-        h, w, c = _dims(exemplar_shape)
+        h, w, c = dims(exemplar_shape)
         terms = {"exemplar and its statistics": (8.0 + self.bytes_per_pixel) * c * h * w}
         if output_shape is not None:
-            terms["working arrays of the output"] = self.bytes_per_pixel * c * _pixels(output_shape)
+            terms["working arrays of the output"] = self.bytes_per_pixel * c * pixels(output_shape)
         return terms
 
     def estimate_memory(
@@ -397,7 +397,7 @@ class TextureSynthesizer:
             )
         check_memory(
             need,
-            what=f"method {self.name!r} {task} (mostly {main}: {_human_bytes(size)})",
+            what=f"method {self.name!r} {task} (mostly {main}: {human_bytes(size)})",
             advice=advice,
         )
 

@@ -13,22 +13,22 @@ from __future__ import annotations
 __all__: list[str] = []
 
 
-def _dims(shape: tuple[int, ...]) -> tuple[int, int, int]:
+def dims(shape: tuple[int, ...]) -> tuple[int, int, int]:
     """``(H, W, C)`` of an image shape ``(H, W)`` or ``(H, W, C)`` (C = 1 for grey)."""
     return int(shape[0]), int(shape[1]), int(shape[2]) if len(shape) > 2 else 1
 
 
-def _pixels(shape: tuple[int, ...]) -> float:
+def pixels(shape: tuple[int, ...]) -> float:
     """Number of pixels of a shape ``(H, W, ...)``, as a float (no overflow)."""
     return float(shape[0]) * float(shape[1])
 
 
-def _output_bytes(channels: int, output_shape: tuple[int, ...]) -> float:
+def output_bytes(channels: int, output_shape: tuple[int, ...]) -> float:
     """What :meth:`TextureSynthesizer._as_output` adds: a clipped float64 copy, then float32."""
-    return 12.0 * channels * _pixels(output_shape)
+    return 12.0 * channels * pixels(output_shape)
 
 
-def _fft_search_bytes(h: int, w: int, c: int, *, masks: int = 3) -> tuple[float, float, float]:
+def fft_search_bytes(h: int, w: int, c: int, *, masks: int = 3) -> tuple[float, float, float]:
     """``(kept, build, query)`` bytes of :class:`~texsyn.ops.FFTPatchSearch` on ``h x w x c``.
 
     ``kept``: the channel spectra and the spectra of the squares; ``build``: the transient of
@@ -42,7 +42,7 @@ def _fft_search_bytes(h: int, w: int, c: int, *, masks: int = 3) -> tuple[float,
     return kept, build, query
 
 
-def _nonparametric_bytes(
+def nonparametric_bytes(
     h: int, w: int, c: int, window: int, output_shape: tuple[int, int] | None
 ) -> tuple[float, float]:
     """``(kept, transient)`` bytes of :class:`~texsyn.ops.nonparametric.NonParametricSampler`.

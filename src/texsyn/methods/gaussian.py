@@ -41,7 +41,7 @@ from ..ops import (
 from ..ops.gaussian import local_gaussian
 from ..ops.portilla import max_scales
 from ._base import Progress, TextureSynthesizer
-from ._memory import _dims, _fft_search_bytes, _output_bytes
+from ._memory import dims, fft_search_bytes, output_bytes
 from ..errors import InputError
 from ..ops.linalg import fixed_order
 
@@ -208,8 +208,8 @@ class _LocalGaussianBase(TextureSynthesizer):
 
     def memory_terms(self, exemplar_shape, output_shape=None) -> dict[str, float]:
         """Exemplar spectra; the canvas, one FFT search and one local Gaussian (``docs/memory.md``)."""
-        h, w, c = _dims(exemplar_shape)
-        kept, build, query = _fft_search_bytes(h, w, c, masks=9)
+        h, w, c = dims(exemplar_shape)
+        kept, build, query = fft_search_bytes(h, w, c, masks=9)
         terms = {"exemplar and its spectra": 8.0 * h * w * c + kept}
         if output_shape is None:
             terms["spectra construction"] = build
@@ -221,7 +221,7 @@ class _LocalGaussianBase(TextureSynthesizer):
         # the search's transients are freed before the neighbours are gathered
         terms["one search or one local Gaussian"] = max(query, _local_gaussian_bytes(m, n * n * c))
         terms["canvas"] = float(canvas[0]) * canvas[1] * (8.0 * c + 1.0)
-        terms["output image"] = _output_bytes(c, output_shape)
+        terms["output image"] = output_bytes(c, output_shape)
         return terms
 
     def _sample(self, shape, rng, callback):
@@ -508,14 +508,14 @@ class MSLG(TextureSynthesizer):
         The zoom-in transforms the mirror extension of each scale, a complex image four times
         the size of the next one, so it dominates the sampling of large outputs.
         """
-        h, w, c = _dims(exemplar_shape)
+        h, w, c = dims(exemplar_shape)
         big = 2 ** (self.n_scales - 1)
         hc, wc = (h // big) * big, (w // big) * big
         kept_total, build_max = 8.0 * h * w * c, 0.0
         for k in range(self.n_scales):
             sh, sw = hc >> k, wc >> k
             coarse = k == self.n_scales - 1
-            kept, build, _ = _fft_search_bytes(sh, sw, c if coarse else 2 * c)
+            kept, build, _ = fft_search_bytes(sh, sw, c if coarse else 2 * c)
             kept_total += kept + 8.0 * sh * sw * c * (1 if coarse else 2)
             build_max = max(build_max, build + 24.0 * sh * sw * c)
         terms = {"exemplar scales and their spectra": kept_total}
@@ -531,14 +531,14 @@ class MSLG(TextureSynthesizer):
         n = self.patch_size
         canvas = float(big * max(-(-output_shape[0] // big), n)) * float(big * max(-(-output_shape[1] // big), n))
         m = min(self.n_neighbors, max(1, ((hc >> (self.n_scales - 1)) - n + 1) * ((wc >> (self.n_scales - 1)) - n + 1)))
-        _, _, query = _fft_search_bytes(hc, wc, 2 * c if self.n_scales > 1 else c, masks=9)
+        _, _, query = fft_search_bytes(hc, wc, 2 * c if self.n_scales > 1 else c, masks=9)
         search = max(query, _local_gaussian_bytes(m, n * n * c))
         zoom = (280.0 if self.zoom_boundary == "symmetric" else 48.0) * c * canvas
         if self.n_scales > 1:
             terms["Fourier zoom-in of the finest scale"] = zoom + 8.0 * c * canvas / 4
         terms["one search or one local Gaussian"] = search
         terms["canvas, low-pass and mask"] = canvas * (16.0 * c + 1.0)
-        terms["output image"] = _output_bytes(c, output_shape)
+        terms["output image"] = output_bytes(c, output_shape)
         if post is not None:
             terms["Portilla-Simoncelli refinement"] = sum(post.memory_terms(exemplar_shape, output_shape).values())
         return terms

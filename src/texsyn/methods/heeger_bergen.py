@@ -15,7 +15,7 @@ from ..ops import (
     periodic_smooth_decomposition,
 )
 from ._base import Progress, TextureSynthesizer
-from ._memory import _dims, _output_bytes
+from ._memory import dims, output_bytes
 
 __all__ = ["HeegerBergen"]
 
@@ -84,7 +84,7 @@ class HeegerBergen(TextureSynthesizer):
 
         See ``docs/memory.md``.
         """
-        h, w, c = _dims(exemplar_shape)
+        h, w, c = dims(exemplar_shape)
         k = float(h * w)
         _, coefficients = self._pyramid_bytes(k, c)
         terms = {"exemplar and its sorted subbands": 16.0 * k * c + coefficients}
@@ -99,7 +99,7 @@ class HeegerBergen(TextureSynthesizer):
         terms["histogram targets"] = coefficients + 8.0 * c * canvas
         terms["subbands (two iterations)"] = 2.0 * coefficients
         terms["image and spectra"] = 40.0 * c * canvas
-        terms["output image"] = _output_bytes(c, output_shape)
+        terms["output image"] = output_bytes(c, output_shape)
         return terms
 
     def _fit(self, exemplar: np.ndarray) -> None:

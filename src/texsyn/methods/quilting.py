@@ -9,7 +9,7 @@ import numpy as np
 from .._validation import Range
 from ..ops import FFTPatchSearch, as_channels, boundary_cut_mask, overlap_error
 from ._base import Progress, TextureSynthesizer
-from ._memory import _dims, _fft_search_bytes, _output_bytes
+from ._memory import dims, fft_search_bytes, output_bytes
 from ..errors import InputError
 
 __all__ = ["Quilting"]
@@ -83,8 +83,8 @@ class Quilting(TextureSynthesizer):
 
         See ``docs/memory.md``.
         """
-        h, w, c = _dims(exemplar_shape)
-        kept, build, query = _fft_search_bytes(h, w, c, masks=3)
+        h, w, c = dims(exemplar_shape)
+        kept, build, query = fft_search_bytes(h, w, c, masks=3)
         terms = {"exemplar and its spectra": 8.0 * h * w * c + kept}
         if output_shape is None:
             terms["spectra construction"] = build
@@ -94,7 +94,7 @@ class Quilting(TextureSynthesizer):
         cols = max(1, -(-(output_shape[1] - o) // step)) * step + o
         terms["one block search"] = query
         terms["canvas and source map"] = float(rows) * cols * (8.0 * c + 8.0)
-        terms["output image"] = _output_bytes(c, output_shape)
+        terms["output image"] = output_bytes(c, output_shape)
         return terms
 
     def _sample(self, shape, rng, callback):

@@ -23,7 +23,7 @@ from ..ops import as_channels, crop_to_multiple, rgb_to_yuv, yuv_to_rgb
 from ..ops.dtcwt import DTCWT, DTCWTPyramid
 from ..ops.nonparametric import NonParametricSampler
 from ._base import Progress, TextureSynthesizer
-from ._memory import _dims, _nonparametric_bytes, _output_bytes
+from ._memory import dims, nonparametric_bytes, output_bytes
 from ..errors import InputError
 
 __all__ = ["ComplexWaveletSampling", "propagate", "block_indices"]
@@ -146,7 +146,7 @@ class ComplexWaveletSampling(TextureSynthesizer):
         and ``refine`` compares ``window^2`` complex neighbourhoods per level-1 position, which
         dominates large outputs (``docs/memory.md``).
         """
-        h, w, c = _dims(exemplar_shape)
+        h, w, c = dims(exemplar_shape)
         q = 2**self.levels
         hc, wc = (h // q) * q, (w // q) * q
         k = float(hc * wc)
@@ -155,7 +155,7 @@ class ComplexWaveletSampling(TextureSynthesizer):
         pad = self.window // 2 if self.candidates == "all" else 0
         top_h, top_w = hc // q + 2 * pad, wc // q + 2 * pad
         grid = None if output_shape is None else (-(-output_shape[0] // q), -(-output_shape[1] // q))
-        kept, transient = _nonparametric_bytes(top_h, top_w, 12, self.window, grid)
+        kept, transient = nonparametric_bytes(top_h, top_w, 12, self.window, grid)
         terms = {"exemplar pyramids and coarsest windows": 16.0 * k * c + c * pyramid + kept}
         if output_shape is None:
             terms["pyramid construction"] = max(8.0 * taps * k + 80.0 * k, transient)
@@ -164,7 +164,7 @@ class ComplexWaveletSampling(TextureSynthesizer):
         terms["growth at the coarsest level"] = transient
         terms["coefficient maps"] = 16.0 * full * (1.0 / 3 + 4.0 / 4**self.levels + 1.5)
         terms["one output pyramid and its inverse"] = pyramid / k * full + (8.0 * taps + 8.0) * full
-        terms["output planes"] = 8.0 * c * full + _output_bytes(c, output_shape)
+        terms["output planes"] = 8.0 * c * full + output_bytes(c, output_shape)
         if self.refine:
             # per level-1 position (full / 4): template, candidate windows and their
             # difference, window^2 x 6 complex values each, and two real squares

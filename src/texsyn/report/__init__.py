@@ -21,7 +21,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from .. import __version__
+from .._version import __version__
 from ..methods import METHODS, Progress, make_method
 from ..metrics import METRIC_DESCRIPTIONS, evaluate, nearest_patch_field, synthesis_map
 from ..errors import InputError
