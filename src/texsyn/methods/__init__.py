@@ -57,6 +57,7 @@ def get_method(name: str) -> type[TextureSynthesizer]:
 def make_method(name: str, **params) -> TextureSynthesizer:
     """Construct a method by name, rejecting unknown parameters with the allowed list."""
     cls = get_method(name)
+    params = cls.canonical_params(params, stacklevel=2)
     specs = cls.param_specs()
     unknown = sorted(set(params) - set(specs))
     if unknown:

@@ -10,9 +10,11 @@ The command line, ``texsyn methods``, :meth:`get_params` and the report all read
 
 from __future__ import annotations
 
+import functools
 import inspect
 import re
 import typing
+import warnings
 from dataclasses import dataclass
 from typing import Any, Callable, ClassVar
 
@@ -28,7 +30,7 @@ from .._validation import (
     normalize_rng,
 )
 from ..errors import InputError, InputTypeError
-from ._memory import dims, pixels
+from ._memory import pixel_count, shape_dims
 from ..ops.linalg import fixed_order
 
 __all__ = ["ParamSpec", "Progress", "SynthesisResult", "TextureSynthesizer"]
@@ -232,6 +234,9 @@ class TextureSynthesizer:
 
     name: ClassVar[str] = ""
     summary: ClassVar[str] = ""
+    #: old parameter names still accepted, each mapped to its new name, with a
+    #: DeprecationWarning (docs/architecture.md, "Vocabulary")
+    deprecated_params: ClassVar[dict[str, str]] = {}
     reference: ClassVar[str] = ""
     has_source_map: ClassVar[bool] = False
     #: whether every output pixel equals the exemplar pixel its source map names
@@ -242,6 +247,42 @@ class TextureSynthesizer:
     #: factor on the sum of :meth:`memory_terms` for the arrays too small to be modelled one
     #: by one and the allocator's slack; 1 MiB is added for small objects (``docs/memory.md``)
     memory_margin: ClassVar[float] = 1.25
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        if cls.__dict__.get("deprecated_params") and "__init__" in cls.__dict__:
+            init = cls.__dict__["__init__"]
+
+            @functools.wraps(init)
+            def __init__(self, *args: Any, **params: Any) -> None:
+                init(self, *args, **type(self).canonical_params(params, stacklevel=2))
+
+            cls.__init__ = __init__  # type: ignore[method-assign]
+
+    @classmethod
+    def canonical_params(cls, params: dict[str, Any], *, stacklevel: int = 2) -> dict[str, Any]:
+        """``params`` with deprecated names replaced by their new ones (a warning each).
+
+        Raises
+        ------
+        InputError
+            When a parameter is given under both its old and its new name.
+        """
+        out = dict(params)
+        for old, new in cls.deprecated_params.items():
+            if old in out:
+                if new in out:
+                    raise InputError(
+                        f"parameter {old!r} of method {cls.name!r} is the deprecated name of "
+                        f"{new!r}; give only {new!r}"
+                    )
+                warnings.warn(
+                    f"parameter {old!r} of method {cls.name!r} is deprecated; use {new!r}",
+                    DeprecationWarning,
+                    stacklevel=stacklevel + 1,
+                )
+                out[new] = out.pop(old)
+        return out
 
     # ------------------------------------------------------------------ parameters
     @classmethod
@@ -314,10 +355,10 @@ class TextureSynthesizer:
         -------
         dict of str to float
         """
-        h, w, c = dims(exemplar_shape)
+        h, w, c = shape_dims(exemplar_shape)
         terms = {"exemplar and its statistics": (8.0 + self.bytes_per_pixel) * c * h * w}
         if output_shape is not None:
-            terms["working arrays of the output"] = self.bytes_per_pixel * c * pixels(output_shape)
+            terms["working arrays of the output"] = self.bytes_per_pixel * c * pixel_count(output_shape)
         return terms
 
     def estimate_memory(

@@ -13,19 +13,19 @@ from __future__ import annotations
 __all__: list[str] = []
 
 
-def dims(shape: tuple[int, ...]) -> tuple[int, int, int]:
+def shape_dims(shape: tuple[int, ...]) -> tuple[int, int, int]:
     """``(H, W, C)`` of an image shape ``(H, W)`` or ``(H, W, C)`` (C = 1 for grey)."""
     return int(shape[0]), int(shape[1]), int(shape[2]) if len(shape) > 2 else 1
 
 
-def pixels(shape: tuple[int, ...]) -> float:
+def pixel_count(shape: tuple[int, ...]) -> float:
     """Number of pixels of a shape ``(H, W, ...)``, as a float (no overflow)."""
     return float(shape[0]) * float(shape[1])
 
 
 def output_bytes(channels: int, output_shape: tuple[int, ...]) -> float:
     """What :meth:`TextureSynthesizer._as_output` adds: a clipped float64 copy, then float32."""
-    return 12.0 * channels * pixels(output_shape)
+    return 12.0 * channels * pixel_count(output_shape)
 
 
 def fft_search_bytes(h: int, w: int, c: int, *, masks: int = 3) -> tuple[float, float, float]:

@@ -9,7 +9,7 @@ import numpy as np
 from .._validation import Range
 from ..ops.nonparametric import NonParametricSampler
 from ._base import Progress, TextureSynthesizer
-from ._memory import dims, nonparametric_bytes, output_bytes
+from ._memory import shape_dims, nonparametric_bytes, output_bytes
 from ..errors import InputError
 
 __all__ = ["EfrosLeung"]
@@ -82,7 +82,7 @@ class EfrosLeung(TextureSynthesizer):
     def memory_terms(self, exemplar_shape, output_shape=None) -> dict[str, float]:
         """Every exemplar window (squared and scaled, ``16 K w^2 C`` bytes); the canvas and one
         batch of searches against all windows (``docs/memory.md``)."""
-        h, w, c = dims(exemplar_shape)
+        h, w, c = shape_dims(exemplar_shape)
         kept, transient = nonparametric_bytes(h, w, c, self.window_size, output_shape)
         terms = {"exemplar windows": 8.0 * h * w * c + kept}
         if output_shape is None:

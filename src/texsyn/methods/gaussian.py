@@ -41,7 +41,7 @@ from ..ops import (
 from ..ops.gaussian import local_gaussian
 from ..ops.portilla import max_scales
 from ._base import Progress, TextureSynthesizer
-from ._memory import dims, fft_search_bytes, output_bytes
+from ._memory import shape_dims, fft_search_bytes, output_bytes
 from ..errors import InputError
 from ..ops.linalg import fixed_order
 
@@ -208,7 +208,7 @@ class _LocalGaussianBase(TextureSynthesizer):
 
     def memory_terms(self, exemplar_shape, output_shape=None) -> dict[str, float]:
         """Exemplar spectra; the canvas, one FFT search and one local Gaussian (``docs/memory.md``)."""
-        h, w, c = dims(exemplar_shape)
+        h, w, c = shape_dims(exemplar_shape)
         kept, build, query = fft_search_bytes(h, w, c, masks=9)
         terms = {"exemplar and its spectra": 8.0 * h * w * c + kept}
         if output_shape is None:
@@ -508,7 +508,7 @@ class MSLG(TextureSynthesizer):
         The zoom-in transforms the mirror extension of each scale, a complex image four times
         the size of the next one, so it dominates the sampling of large outputs.
         """
-        h, w, c = dims(exemplar_shape)
+        h, w, c = shape_dims(exemplar_shape)
         big = 2 ** (self.n_scales - 1)
         hc, wc = (h // big) * big, (w // big) * big
         kept_total, build_max = 8.0 * h * w * c, 0.0

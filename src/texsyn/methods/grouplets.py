@@ -28,7 +28,7 @@ from ..ops.flow import association_fields, builtin_flow, orient_field, structure
 from ..ops.fluid import advect, diffuse, project, rescale_speed
 from ..ops.grouplets import WaveletGroupletTransform
 from ._base import Progress, TextureSynthesizer
-from ._memory import dims, output_bytes, pixels
+from ._memory import shape_dims, output_bytes, pixel_count
 from ..errors import InputError
 from ..ops.linalg import fixed_order
 
@@ -250,7 +250,7 @@ class Grouplets(TextureSynthesizer):
         a projection holds about four copies of them besides the cached histogram targets
         (``docs/memory.md``).
         """
-        h, w, c = dims(exemplar_shape)
+        h, w, c = shape_dims(exemplar_shape)
         k = float(h * w)
         bands = self._bands(c)
         depth = self.grouplet_levels
@@ -258,7 +258,7 @@ class Grouplets(TextureSynthesizer):
         if output_shape is None:
             terms["analysis of the exemplar"] = 12.0 * bands * k + 20.0 * depth * k + 100.0 * k + 24.0 * k * c
             return terms
-        pixels = pixels(output_shape)
+        pixels = pixel_count(output_shape)
         terms["histogram targets"] = 8.0 * bands * pixels + 8.0 * c * pixels
         terms["coefficients of one projection"] = 24.0 * bands * pixels
         terms["association fields and flow"] = 40.0 * depth * pixels + 120.0 * pixels
@@ -267,9 +267,9 @@ class Grouplets(TextureSynthesizer):
 
     def _animate_terms(self, exemplar_shape, shape, loop: int) -> dict[str, float]:
         """:meth:`memory_terms` of a frame plus the fluid fields and the frames a loop keeps."""
-        _, _, c = dims(exemplar_shape)
+        _, _, c = shape_dims(exemplar_shape)
         terms = self.memory_terms(exemplar_shape, shape)
-        pixels = pixels(shape)
+        pixels = pixel_count(shape)
         terms["velocity, advection and diffusion"] = 160.0 * pixels + 24.0 * c * pixels
         if loop:
             terms["frames kept for the loop"] = loop * pixels * (4.0 * c + 16.0)

@@ -15,7 +15,7 @@ from ..ops import (
     periodic_smooth_decomposition,
 )
 from ._base import Progress, TextureSynthesizer
-from ._memory import dims, output_bytes
+from ._memory import shape_dims, output_bytes
 
 __all__ = ["HeegerBergen"]
 
@@ -84,7 +84,7 @@ class HeegerBergen(TextureSynthesizer):
 
         See ``docs/memory.md``.
         """
-        h, w, c = dims(exemplar_shape)
+        h, w, c = shape_dims(exemplar_shape)
         k = float(h * w)
         _, coefficients = self._pyramid_bytes(k, c)
         terms = {"exemplar and its sorted subbands": 16.0 * k * c + coefficients}

@@ -30,7 +30,7 @@ from ..ops.patch_wavelet import (
     planned_widths,
 )
 from ._base import Progress, TextureSynthesizer
-from ._memory import dims, output_bytes
+from ._memory import shape_dims, output_bytes
 from ..errors import InputError
 from ..ops.linalg import fixed_order
 
@@ -164,13 +164,13 @@ class PatchWavelet(TextureSynthesizer):
     # ------------------------------------------------------------------ memory
     def _width_dims(self, exemplar_shape) -> list[tuple[int, int]]:
         """``(width, descriptor length)`` of every index the transform builds."""
-        _, _, c = dims(exemplar_shape)
+        _, _, c = shape_dims(exemplar_shape)
         widths = planned_widths(exemplar_shape, min_width=self.min_width, feature_width=self.feature_width)
         return [(width, descriptor_dimension(width, self.max_resolution, c)) for width in widths]
 
     def _model_terms(self, exemplar_shape) -> dict[str, float]:
         """What a prepared transform holds: float32 indexes, extended exemplar, block means."""
-        h, w, c = dims(exemplar_shape)
+        h, w, c = shape_dims(exemplar_shape)
         k = float(h * w)
         pairs = self._width_dims(exemplar_shape)
         block_means = sum(1 for width, _ in pairs if width > self.max_resolution)
@@ -181,7 +181,7 @@ class PatchWavelet(TextureSynthesizer):
 
     def _build_bytes(self, exemplar_shape) -> float:
         """Transient of building the largest index: float64 descriptors and their centred copy."""
-        h, w, _ = dims(exemplar_shape)
+        h, w, _ = shape_dims(exemplar_shape)
         k = float(h * w)
         return max(20.0 * k * d + 16.0 * k * math.sqrt(d) + 16.0 * k for _, d in self._width_dims(exemplar_shape))
 
@@ -201,7 +201,7 @@ class PatchWavelet(TextureSynthesizer):
         Level ``j`` predicts at most ``grid / 2^(2j - 1)`` samples with windows of
         ``clamp(2^j, min_width, W_max)``.
         """
-        h, w, _ = dims(exemplar_shape)
+        h, w, _ = shape_dims(exemplar_shape)
         dims = dict(self._width_dims(exemplar_shape))
         top = max(dims)
         low = min(self.min_width, top)
@@ -234,7 +234,7 @@ class PatchWavelet(TextureSynthesizer):
         float64 descriptors; a synthesis of ``h x w`` works on the ``N x N`` coordinate map of
         the next power of two ``N >= max(h, w)`` and searches in chunks (``docs/memory.md``).
         """
-        h, w, c = dims(exemplar_shape)
+        h, w, c = shape_dims(exemplar_shape)
         k = float(h * w)
         terms = self._model_terms(exemplar_shape)
         if output_shape is None:
@@ -287,7 +287,7 @@ class PatchWavelet(TextureSynthesizer):
         return int(math.ceil(self._memory_total(terms)))
 
     def _modify_terms(self, exemplar_shape, texture_shape, equalize: bool, n_ratios: int) -> dict[str, float]:
-        h, w, c = dims(exemplar_shape)
+        h, w, c = shape_dims(exemplar_shape)
         k = float(h * w)
         n_h, n_w = self.modify_grid(texture_shape[:2])
         grid = float(n_h * n_w)

@@ -23,7 +23,7 @@ from .._validation import OneOf, Range, as_exemplar
 from ..ops import ColorPCA, as_channels, luma, periodic_smooth_decomposition
 from ..ops.portilla import ComplexSteerablePyramid, PSStatistics, pixel_statistics, ps_statistics, ps_synthesis
 from ._base import Progress, TextureSynthesizer
-from ._memory import dims, output_bytes
+from ._memory import shape_dims, output_bytes
 from ..ops.linalg import fixed_order
 
 __all__ = ["PortillaSimoncelli"]
@@ -110,7 +110,7 @@ class PortillaSimoncelli(TextureSynthesizer):
         ``110 + 150 n_orientations`` bytes per pixel and channel, nearly independent of
         ``n_scales`` (the coarser scales add a third), measured with ``tracemalloc``.
         """
-        h, w, c = dims(exemplar_shape)
+        h, w, c = shape_dims(exemplar_shape)
         k = float(h * w)
         channels = 3 if c == 3 and self.colour == "joint" else 1
         terms = {"exemplar": 16.0 * k * c}

@@ -9,7 +9,7 @@ import numpy as np
 from .._validation import Range
 from ..ops import FFTPatchSearch, as_channels, boundary_cut_mask, overlap_error
 from ._base import Progress, TextureSynthesizer
-from ._memory import dims, fft_search_bytes, output_bytes
+from ._memory import shape_dims, fft_search_bytes, output_bytes
 from ..errors import InputError
 
 __all__ = ["Quilting"]
@@ -83,7 +83,7 @@ class Quilting(TextureSynthesizer):
 
         See ``docs/memory.md``.
         """
-        h, w, c = dims(exemplar_shape)
+        h, w, c = shape_dims(exemplar_shape)
         kept, build, query = fft_search_bytes(h, w, c, masks=3)
         terms = {"exemplar and its spectra": 8.0 * h * w * c + kept}
         if output_shape is None:

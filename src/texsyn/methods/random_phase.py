@@ -7,7 +7,7 @@ import numpy as np
 
 from ..ops import as_channels, periodic_smooth_decomposition
 from ._base import TextureSynthesizer
-from ._memory import dims, output_bytes, pixels
+from ._memory import shape_dims, output_bytes, pixel_count
 
 __all__ = ["RandomPhase", "random_phase_noise"]
 
@@ -76,7 +76,7 @@ class RandomPhase(TextureSynthesizer):
 
     def memory_terms(self, exemplar_shape, output_shape=None) -> dict[str, float]:
         """The spot; the embedded spot, its spectrum and the random phase (``docs/memory.md``)."""
-        h, w, c = dims(exemplar_shape)
+        h, w, c = shape_dims(exemplar_shape)
         k = float(h * w)
         terms = {"exemplar and spot": 16.0 * k * c}
         if output_shape is None:
@@ -85,7 +85,7 @@ class RandomPhase(TextureSynthesizer):
         canvas = float(max(output_shape[0], h)) * float(max(output_shape[1], w))
         # the spectra are freed before the output is cropped, shifted and converted
         terms["embedded spot, spectra and phase"] = max(
-            canvas * (40.0 * c + 28.0), 8.0 * c * pixels(output_shape) + output_bytes(c, output_shape)
+            canvas * (40.0 * c + 28.0), 8.0 * c * pixel_count(output_shape) + output_bytes(c, output_shape)
         )
         return terms
 

@@ -37,7 +37,7 @@ from ..ops import (
 from ..ops.graphcut import graphcut_reassemble
 from ..ops.sparse import constrained_matching_pursuit, ksvd
 from ._base import Progress, TextureSynthesizer
-from ._memory import dims, output_bytes, pixels
+from ._memory import shape_dims, output_bytes, pixel_count
 from ..errors import InputError
 from ..ops.linalg import matmul
 
@@ -336,7 +336,7 @@ class ConstrainedSparse(TextureSynthesizer):
         of all of them (``n_atoms x K`` correlations and codes); sampling holds the codes of
         the output patches and the graph-cut reassembly (``docs/memory.md``).
         """
-        h, w, c = dims(exemplar_shape)
+        h, w, c = shape_dims(exemplar_shape)
         tau, s = self.patch_size, self.sparsity
         dim = tau * tau * c
         big = 2 ** (self._scales - 1)
@@ -365,7 +365,7 @@ class ConstrainedSparse(TextureSynthesizer):
         pursuit = 8.0 * patches * dim + 17.0 * n * patches + 130.0 * patches
         reassembly = 16.0 * patches * dim + 8.0 * n * patches + 80.0 * c * pixels
         terms["patch codes and reassembly"] = max(pursuit, reassembly)
-        terms["output image"] = output_bytes(c, output_shape) + 16.0 * c * pixels(output_shape)
+        terms["output image"] = output_bytes(c, output_shape) + 16.0 * c * pixel_count(output_shape)
         return terms
 
     # ---------------------------------------------------------------- sample

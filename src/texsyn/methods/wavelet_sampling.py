@@ -23,7 +23,7 @@ from ..ops import as_channels, crop_to_multiple, rgb_to_yuv, yuv_to_rgb
 from ..ops.dtcwt import DTCWT, DTCWTPyramid
 from ..ops.nonparametric import NonParametricSampler
 from ._base import Progress, TextureSynthesizer
-from ._memory import dims, nonparametric_bytes, output_bytes
+from ._memory import shape_dims, nonparametric_bytes, output_bytes
 from ..errors import InputError
 
 __all__ = ["ComplexWaveletSampling", "propagate", "block_indices"]
@@ -146,7 +146,7 @@ class ComplexWaveletSampling(TextureSynthesizer):
         and ``refine`` compares ``window^2`` complex neighbourhoods per level-1 position, which
         dominates large outputs (``docs/memory.md``).
         """
-        h, w, c = dims(exemplar_shape)
+        h, w, c = shape_dims(exemplar_shape)
         q = 2**self.levels
         hc, wc = (h // q) * q, (w // q) * q
         k = float(hc * wc)

@@ -31,7 +31,7 @@ import numpy as np
 from .._validation import OneOf, Range
 from ..ops import as_channels, gaussian_pyramid
 from ._base import Progress, TextureSynthesizer
-from ._memory import dims, output_bytes, pixels
+from ._memory import shape_dims, output_bytes, pixel_count
 from ..errors import InputError
 from ..ops.linalg import matmul
 
@@ -176,7 +176,7 @@ class WeiLevoy(TextureSynthesizer):
         An exact search compares a whole wavefront (about ``width / (window // 2 + 1)``
         pixels) with every exemplar pixel at once (``docs/memory.md``).
         """
-        h, w, c = dims(exemplar_shape)
+        h, w, c = shape_dims(exemplar_shape)
         causal = (self.window**2 - 1) // 2
         parent = self.parent_window**2
         sizes = [(h, w)]
@@ -211,7 +211,7 @@ class WeiLevoy(TextureSynthesizer):
             k = float(sizes[level][0] * sizes[level][1])
             search = 24.0 * n * k if self.search == "exact" else 0.0
             front = max(front, 24.0 * n * dims[level] + 16.0 * n * max(causal, parent) + search)
-        pixels = pixels(output_shape)
+        pixels = pixel_count(output_shape)
         terms["one wavefront of searches"] = front
         terms["output pyramid and source maps"] = pixels * (4.0 / 3 * 8.0 * c + 16.0 * c + 56.0)
         terms["output image"] = output_bytes(c, output_shape)
