@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import texsyn
-from texsyn._validation import _human_bytes, check_output_shape, memory_limit_bytes, parse_memory_size
+from texsyn._validation import human_bytes, check_output_shape, memory_limit_bytes, parse_memory_size
 from texsyn.cli import main
 from texsyn.errors import InputError, MemoryLimitError
 from texsyn.ops.patch_wavelet import PatchWaveletTransform, planned_widths
@@ -83,7 +83,7 @@ def test_every_method_refuses_a_huge_output_at_once(monkeypatch, method_name, gr
     assert "\n" not in message
     estimate = method.estimate_memory(grey_exemplar.shape, (4000, 4000))
     assert estimate > 64 * 2**20
-    assert f"about {_human_bytes(estimate)}" in message  # the estimate
+    assert f"about {human_bytes(estimate)}" in message  # the estimate
     assert "64.0 MiB" in message and f"{VAR}=64M" in message  # the limit and where it comes from
     assert f"set {VAR}" in message and "smaller size" in message  # how to change it
     assert isinstance(info.value, MemoryError) and isinstance(info.value, ValueError)
