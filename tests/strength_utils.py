@@ -9,7 +9,8 @@ from __future__ import annotations
 import numpy as np
 
 import texsyn
-from texsyn.ops import SteerablePyramid, as_channels, periodic_smooth_decomposition
+from texsyn.ops import as_channels, periodic_smooth_decomposition
+from texsyn.transforms.steerable import SteerablePyramid
 
 #: the exemplar of the classic and statistical strength tests: a 40x40 crop of gravel at low
 #: contrast, so that no method needs to clip (the DT-CWT reconstruction is compared exactly)

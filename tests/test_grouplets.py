@@ -9,8 +9,8 @@ from texsyn.cli import main
 from texsyn.io import read_image
 from texsyn.ops.flow import association_fields, builtin_flow, orient_field, structure_tensor_orientation
 from texsyn.ops.fluid import advect, diffuse, divergence, project
-from texsyn.ops.grouplets import GroupletTransform, WaveletGroupletTransform
-from texsyn.ops.pyramids import LaplacianTightFrame
+from texsyn.transforms.grouplets import GroupletTransform, WaveletGroupletTransform
+from texsyn.transforms.pyramids import LaplacianTightFrame
 
 
 def oriented_texture(size: int, angle_deg: float = 0.0, seed: int = 0) -> np.ndarray:

@@ -2,13 +2,8 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from texsyn.ops import (
-    SteerablePyramid,
-    gaussian_blur,
-    gaussian_pyramid,
-    zoom_in,
-    zoom_out,
-)
+from texsyn.transforms.pyramids import gaussian_blur, gaussian_pyramid, zoom_in, zoom_out
+from texsyn.transforms.steerable import SteerablePyramid
 
 
 def smooth_image(shape, seed=0):

@@ -6,15 +6,15 @@ from scipy.ndimage import gaussian_filter
 
 import texsyn
 from texsyn.metrics import ps_distance, ps_statistics
-from texsyn.ops.portilla import (
-    ComplexSteerablePyramid,
+from texsyn.models.portilla import central_autocorrelation
+from texsyn.models.portilla_projections import (
     adjust_correlation,
     adjust_cross_correlation,
-    central_autocorrelation,
     impose_autocorrelation,
     impose_kurtosis,
     impose_skewness,
 )
+from texsyn.transforms.complex_steerable import ComplexSteerablePyramid
 
 
 @pytest.mark.parametrize("shape", [(64, 64), (45, 70)])
@@ -154,7 +154,7 @@ def test_agrees_with_plenoptic_when_installed():
     torch = pytest.importorskip("torch")
     import plenoptic
 
-    from texsyn.ops.portilla import parent_features
+    from texsyn.models.portilla import parent_features
 
     image = texsyn.data.exemplar("brick", size=64).astype(np.float64)
     models = getattr(plenoptic, "models", None) or plenoptic.simulate  # plenoptic 2.x / 1.x

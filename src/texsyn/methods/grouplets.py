@@ -1,38 +1,42 @@
 """Grouplet texture synthesis along a flow, and fluid-driven dynamic textures (Peyré 2008).
 
-The model has a geometric layer (a direction field learned from the exemplar's structure
-tensor, or given by the user) and a coefficient layer (the marginal histograms of the
-exemplar's wavelet-grouplet coefficients and of its pixels). Static synthesis (Table 1)
-projects white noise alternately onto the band histograms and the pixel histogram of the
-wavelet-grouplet transform built on the requested flow. Dynamic synthesis (Table 2) moves the
-flow with Stam's stable fluids, advects the texture with it, and projects every frame onto the
-grouplet model of the current flow.
+The method class holds the parameters; what ``fit`` learns is a
+:class:`texsyn.models.grouplets.GroupletModel` (the geometric layer and the marginals of the
+wavelet-grouplet coefficients, section 3.1). Static synthesis (Table 1) runs the
+alternating-projections driver :func:`texsyn.drivers.alternating.alternate_projections` from
+white noise along the requested flow. Dynamic synthesis (Table 2) moves the flow with Stam's
+stable fluids (:mod:`texsyn.ops.fluid`), carries the texture with it, and pulls every frame
+back onto the grouplet model of the current flow with the same driver.
 
 References
 ----------
 G. Peyré, "Dynamic texture synthesis with grouplets", MAPMO workshop 2008, sections 2-4,
-Tables 1-2. Implementation notes: spec 03 (resolutions G1-G14).
+Tables 1-2. The steps mapped to the code, the parameters and the deviations from the paper:
+``docs/methods/grouplets.md``.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
-from typing import Annotated, Callable, Iterator
+from typing import Annotated
 
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
 from .._validation import OneOf, Range, check_output_shape, normalize_rng
-from ..ops import ColorPCA, hist_target, luma, match_sorted_rows, periodic_smooth_decomposition
-from ..ops.flow import association_fields, builtin_flow, orient_field, structure_tensor_orientation
-from ..ops.fluid import advect, diffuse, project, rescale_speed
-from ..ops.grouplets import WaveletGroupletTransform
-from ._base import Progress, TextureSynthesizer
-from ._memory import shape_dims, output_bytes, pixel_count
+from ..drivers.alternating import alternate_projections
 from ..errors import InputError
+from ..models.grouplets import GroupletModel, HistogramTargets
+from ..ops.flow import builtin_flow
+from ..ops.fluid import advect, diffuse, project, rescale_speed
 from ..ops.linalg import fixed_order
+from ..ops.progress import Reporter
+from ._base import Progress, TextureSynthesizer
+from ._memory import output_bytes, pixel_count, shape_dims
 
 __all__ = ["Frame", "Grouplets", "GroupletModel"]
+
 
 @dataclass(frozen=True)
 class Frame:
@@ -49,114 +53,6 @@ class Frame:
     index: int
     image: np.ndarray
     flow: np.ndarray
-
-
-class GroupletModel:
-    """The statistics of Peyré's grouplet model, learned from an exemplar (paper section 3.1).
-
-    Parameters
-    ----------
-    exemplar : ndarray, shape (H, W) or (H, W, 3)
-    levels, grouplet_levels : int
-        ``J`` pyramid detail bands and ``L`` grouplet scales.
-    sigma, presmooth : float
-        Structure-tensor smoothing and gradient pre-smoothing (pixels).
-    colour : {'pca', 'grey'}
-        Colour exemplars: synthesise the three principal colour axes with one shared geometry
-        (spec 00, 6.3 b), or convert to grey.
-
-    Attributes
-    ----------
-    flow : ndarray (H, W, 2)
-        Learned direction field ``Gamma_0`` (unit vectors, signs optimised).
-    coherence : ndarray (H, W)
-    band_values : ndarray (J+1, L+1, C, H*W)
-        Sorted wavelet-grouplet coefficients of the exemplar's periodic component.
-    pixel_values : ndarray (C, H*W)
-        Sorted pixel values (principal-axis coordinates for colour).
-    """
-
-    def __init__(self, exemplar: np.ndarray, *, levels: int = 3, grouplet_levels: int = 4, sigma: float = 5.0, presmooth: float = 1.0, colour: str = "pca"):
-        img = np.asarray(exemplar, dtype=np.float64)  # (H, W) or (H, W, 3)
-        self.levels = int(levels)
-        self.grouplet_levels = int(grouplet_levels)
-        # one periodic component (Moisan) serves the geometry and the statistics: the
-        # decomposition is linear and keeps the mean, so it commutes with luma and colour PCA
-        periodic_img = periodic_smooth_decomposition(img)[0]
-        if img.ndim == 3 and colour == "pca":
-            self.pca: ColorPCA | None = ColorPCA(img)
-            coords, periodic = self.pca.forward(img), self.pca.forward(periodic_img)
-        else:
-            self.pca = None
-            coords, periodic = luma(img)[..., None], luma(periodic_img)[..., None]
-        orientation, self.coherence = structure_tensor_orientation(luma(periodic_img), sigma=sigma, presmooth=presmooth)
-        self.flow = orient_field(orientation)
-        self.shape = img.shape[:2]
-        transform = self.transform(self.flow)
-        coefficients = transform.forward(periodic)  # (J+1, L+1, C, H, W)
-        b = coefficients.reshape(coefficients.shape[:3] + (-1,))
-        self.band_values = np.sort(b, axis=-1)
-        self.pixel_values = np.sort(coords.reshape(-1, coords.shape[2]).T, axis=-1)
-        self._targets: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-
-    @property
-    def channels(self) -> int:
-        return self.pixel_values.shape[0]
-
-    def transform(self, flow: np.ndarray) -> WaveletGroupletTransform:
-        """The wavelet-grouplet transform along ``flow`` (raw vectors, any size)."""
-        flow = np.asarray(flow, dtype=np.float64)
-        return WaveletGroupletTransform(association_fields(flow, self.grouplet_levels), flow.shape[:2], self.levels)
-
-    def targets(self, n: int) -> tuple[np.ndarray, np.ndarray]:
-        """Sorted target values for ``n`` pixels: bands ``(B, n)`` and pixels ``(C, n)`` (spec 00, 5.2)."""
-        found = self._targets.get(n)
-        if found is None:
-            bands = self.band_values.reshape(-1, self.band_values.shape[-1])
-            found = (
-                np.stack([hist_target(n, row, presorted=True) for row in bands]),
-                np.stack([hist_target(n, row, presorted=True) for row in self.pixel_values]),
-            )
-            self._targets[n] = found
-        return found
-
-    def noise(self, shape: tuple[int, int], rng: np.random.Generator) -> np.ndarray:
-        """White noise ``(H, W, C)`` with the exemplar's mean and deviation per channel."""
-        mean = self.pixel_values.mean(axis=1)
-        std = self.pixel_values.std(axis=1)
-        return mean + std * rng.standard_normal(tuple(shape) + (self.channels,))
-
-    def match_bands(self, coefficients: np.ndarray) -> np.ndarray:
-        """Give every band of ``(J+1, L+1, C, H, W)`` coefficients the exemplar's histogram."""
-        n = coefficients.shape[-1] * coefficients.shape[-2]
-        bands, _ = self.targets(n)
-        rows = coefficients.reshape(-1, n)
-        return match_sorted_rows(rows, bands).reshape(coefficients.shape)
-
-    def match_pixels(self, image: np.ndarray) -> np.ndarray:
-        """Give every channel of an ``(H, W, C)`` image the exemplar's pixel histogram."""
-        n = image.shape[0] * image.shape[1]
-        _, pixels = self.targets(n)
-        return match_sorted_rows(image.reshape(n, self.channels).T, pixels).T.reshape(image.shape)
-
-    def project(
-        self,
-        image: np.ndarray,
-        transform: WaveletGroupletTransform,
-        iterations: int,
-        callback: Callable[[int, np.ndarray], None] | None = None,
-    ) -> np.ndarray:
-        """Alternating projections onto the model (paper Table 1, steps 2-6, corrected as G4)."""
-        f = image
-        for k in range(iterations):
-            f = self.match_pixels(transform.inverse(self.match_bands(transform.forward(f))))
-            if callback is not None:
-                callback(k + 1, f)
-        return f
-
-    def to_image(self, channels: np.ndarray) -> np.ndarray:
-        """``(H, W, C)`` model channels (principal-axis coordinates) to an ``(H, W[, 3])`` image."""
-        return self.pca.inverse(channels) if self.pca is not None else channels[..., 0]
 
 
 class Grouplets(TextureSynthesizer):
@@ -194,6 +90,17 @@ class Grouplets(TextureSynthesizer):
         Projection iterations onto the grouplet model per frame (Table 2, "a few").
     keep_speed : bool
         Rescale the flow to ``speed`` after every step (compensates viscous decay).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> rows, cols = np.mgrid[:16, :16]
+    >>> stripes = 0.5 + 0.5 * np.sin(0.8 * (rows + 0.3 * cols))
+    >>> method = Grouplets(n_iterations=2, levels=2, grouplet_levels=2).fit(stripes)
+    >>> method.sample((24, 20), rng=0).shape
+    (24, 20)
+    >>> [frame.image.shape for frame in method.animate(2, rng=0)]
+    [(16, 16), (16, 16)]
     """
 
     name = "grouplets"
@@ -247,8 +154,8 @@ class Grouplets(TextureSynthesizer):
         """Sorted wavelet-grouplet coefficients; the output's coefficients, targets and fields.
 
         The redundant transform has ``(levels + 1)(grouplet_levels + 1)`` planes per channel;
-        a projection holds about four copies of them besides the cached histogram targets
-        (``docs/memory.md``).
+        a projection holds about four copies of them besides the histogram targets of the
+        output size (``docs/memory.md``).
         """
         h, w, c = shape_dims(exemplar_shape)
         k = float(h * w)
@@ -275,10 +182,11 @@ class Grouplets(TextureSynthesizer):
             terms["frames kept for the loop"] = loop * pixels * (4.0 * c + 16.0)
         return terms
 
+    # ------------------------------------------------------------------ fit
     def _fit(self, exemplar: np.ndarray) -> None:
         if self.flow != "learned":
             builtin_flow(self.flow, (4, 4))  # reject unknown names before the work
-        self.model_ = GroupletModel(
+        self.model_ = GroupletModel.from_exemplar(
             exemplar,
             levels=self.levels,
             grouplet_levels=self.grouplet_levels,
@@ -287,7 +195,6 @@ class Grouplets(TextureSynthesizer):
             colour=self.colour,
         )
 
-    # ------------------------------------------------------------------ flows
     def flow_field(self, shape: tuple[int, int]) -> np.ndarray:
         """The raw flow of the ``flow`` parameter at an output size (the learned one is tiled)."""
         model: GroupletModel = self.model_
@@ -299,6 +206,26 @@ class Grouplets(TextureSynthesizer):
         return builtin_flow(self.flow, shape)
 
     # ------------------------------------------------------------------ static synthesis
+    def _project(
+        self,
+        channels: np.ndarray,
+        flow: np.ndarray,
+        n_iterations: int,
+        targets: HistogramTargets,
+        reporter: Reporter | None = None,
+        preview: Callable[[np.ndarray], np.ndarray] | None = None,
+    ) -> np.ndarray:
+        """``S(f; Gamma, D_0)``: Table 1 passes along ``flow``, through the alternating driver."""
+        model: GroupletModel = self.model_
+        transform = model.transform(flow)
+        return alternate_projections(
+            channels,
+            lambda f, _k: model.project_once(f, transform, targets),
+            n_iterations,
+            reporter=reporter,
+            preview=preview,
+        )
+
     def _sample(self, shape, rng, callback):
         return self._along(self.flow_field(shape), rng, callback), None
 
@@ -328,23 +255,29 @@ class Grouplets(TextureSynthesizer):
         return self._as_output(self._along(flow, normalize_rng(rng), callback))
 
     def _along(self, flow, rng, callback):
+        """Table 1 from white noise along a raw flow; ``iteration`` records with the iterate."""
         model: GroupletModel = self.model_
-        transform = model.transform(flow)
-        def report(k, f):
-            if callback is not None:
-                callback(Progress("iteration", k, self.n_iterations, image=model.to_image(f)))
-
-        channels = model.project(model.noise(flow.shape[:2], rng), transform, self.n_iterations, report)
+        h, w = flow.shape[:2]
+        reporter = Reporter(callback, "iteration", self.n_iterations)
+        noise = model.noise((h, w), rng)
+        channels = self._project(
+            noise, flow, self.n_iterations, model.targets(h * w), reporter, model.to_image
+        )
         return model.to_image(channels)
 
     # ------------------------------------------------------------------ dynamic synthesis
     def initial_velocity(self, shape: tuple[int, int], rng: np.random.Generator) -> np.ndarray:
-        """``V_0``: the projected learned flow, or projected smoothed noise, at RMS ``speed`` (spec 03, 10)."""
+        """``V_0``: the projected learned flow, or projected smoothed noise, at RMS ``speed``.
+
+        The paper leaves the initial flow open (``docs/methods/grouplets.md``, "Deviations").
+        """
         if self.initial_flow == "learned":
             raw = self.flow_field(shape)
         else:
             width = 0.3 * min(shape)
-            raw = np.stack([gaussian_filter(rng.standard_normal(shape), width, mode="wrap") for _ in range(2)], axis=-1)
+            raw = np.stack(
+                [gaussian_filter(rng.standard_normal(shape), width, mode="wrap") for _ in range(2)], axis=-1
+            )
         return rescale_speed(project(raw), self.speed)
 
     @fixed_order
@@ -382,58 +315,54 @@ class Grouplets(TextureSynthesizer):
         """
         ex = self._require_fitted()
         shape = tuple(ex.shape[:2]) if shape is None else check_output_shape(shape)
+        overlap = int(loop) if loop else 0
         self._check_memory(
             ex.shape,
             shape,
             task=f"animating {shape[1]}x{shape[0]} frames",
             advice="request smaller frames" + (" or a shorter loop" if loop else ""),
-            terms=self._animate_terms(ex.shape, shape, int(loop) if loop else 0),
+            terms=self._animate_terms(ex.shape, shape, overlap),
         )
-        if loop:
-            yield from self._looped(n_frames, shape, rng=rng, callback=callback, overlap=int(loop))
-            return
+        if overlap and not 0 < overlap < int(n_frames):
+            raise InputError(f"loop must be between 1 and n_frames - 1 = {int(n_frames) - 1}, got {overlap}")
         if int(n_frames) < 1:
             raise InputError(f"n_frames must be at least 1, got {n_frames}")
-        generator = normalize_rng(rng)
-        model: GroupletModel = self.model_
-        velocity = self.initial_velocity(shape, generator)
-        def first(k, _f):
-            if callback is not None:
-                callback(Progress("first frame", k, self.n_iterations))
+        frames = self._simulate(int(n_frames) + overlap, shape, normalize_rng(rng), callback)
+        yield from _crossfade(frames, int(n_frames), overlap) if overlap else frames
 
-        texture = model.project(model.noise(shape, generator), model.transform(velocity), self.n_iterations, first)
-        for index in range(int(n_frames)):
+    def _simulate(self, n_frames: int, shape, rng: np.random.Generator, callback) -> Iterator[Frame]:
+        """Table 2: frame 0 along ``V_0``, then advect, diffuse, project and re-project."""
+        model: GroupletModel = self.model_
+        reporter = Reporter(callback, "frames", n_frames)
+        targets = model.targets(shape[0] * shape[1])
+        velocity = self.initial_velocity(shape, rng)
+        first = reporter.stage_of("first frame", self.n_iterations)
+        texture = self._project(model.noise(shape, rng), velocity, self.n_iterations, targets, first)
+        for index in range(n_frames):
             if index > 0:
-                texture = advect(texture, velocity, self.tau)
+                texture = advect(texture, velocity, self.tau)  # step 2, with the old velocity
                 moved = advect(velocity, velocity, self.tau)
-                texture = diffuse(texture, self.tau * self.texture_viscosity)
-                velocity = project(diffuse(moved, self.tau * self.viscosity))
+                texture = diffuse(texture, self.tau * self.texture_viscosity)  # step 3
+                velocity = project(diffuse(moved, self.tau * self.viscosity))  # step 4
                 if self.keep_speed:
                     velocity = rescale_speed(velocity, self.speed)
-                texture = model.project(texture, model.transform(velocity), self.n_projections)
-            if callback is not None:
-                callback(Progress("frames", index + 1, int(n_frames)))
+                texture = self._project(texture, velocity, self.n_projections, targets)
+            reporter(index + 1)
             yield Frame(index, self._as_output(model.to_image(texture)), velocity.copy())
 
-    def _looped(self, n_frames, shape, *, rng, callback, overlap):
-        if not 0 < overlap < int(n_frames):
-            raise InputError(f"loop must be between 1 and n_frames - 1 = {int(n_frames) - 1}, got {overlap}")
-        total = int(n_frames) + overlap
 
-        def report(progress):
-            if callback is not None:
-                callback(progress if progress.stage != "frames" else Progress("frames", progress.done, total))
-
-        head = []
-        for frame in self.animate(total, shape, rng=rng, callback=report):
-            i = frame.index
-            if i < overlap:
-                head.append(frame)
-            elif i < n_frames:
-                yield Frame(i - overlap, frame.image, frame.flow)
-            else:
-                k = i - n_frames
-                w = (k + 1) / (overlap + 1)
-                image = (1 - w) * frame.image.astype(np.float64) + w * head[k].image
-                flow = (1 - w) * frame.flow + w * head[k].flow
-                yield Frame(i - overlap, image.astype(np.float32), flow)
+def _crossfade(frames: Iterable[Frame], n_frames: int, overlap: int) -> Iterator[Frame]:
+    """A looping sequence: drop the first ``overlap`` frames and fade the last ones into them."""
+    head = []
+    for frame in frames:
+        i = frame.index
+        if i < overlap:
+            head.append(frame)
+        elif i < n_frames:
+            yield Frame(i - overlap, frame.image, frame.flow)
+        else:
+            k = i - n_frames
+            w = (k + 1) / (overlap + 1)
+            image = (1 - w) * frame.image.astype(np.float64) + w * head[k].image
+            flow = (1 - w) * frame.flow + w * head[k].flow
+            yield Frame(i - overlap, image.astype(np.float32), flow)

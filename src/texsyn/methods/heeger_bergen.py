@@ -1,4 +1,15 @@
-"""Heeger-Bergen pyramid-based texture synthesis (Heeger and Bergen 1995)."""
+"""Heeger–Bergen pyramid-based texture synthesis (Heeger and Bergen 1995).
+
+The paper's algorithm (its ``match-texture`` procedure), and where each step is:
+
+1. analyse the exemplar with a steerable pyramid and keep the histogram of its pixels and of
+   every subband: ``fit`` builds a :class:`texsyn.models.histograms.SubbandHistograms`;
+2. start from white noise with the exemplar's pixel histogram: :meth:`HeegerBergen._sample`;
+3. repeat: analyse, match every subband's histogram, reconstruct, match the pixel histogram:
+   :meth:`HeegerBergen._step`, run by :func:`texsyn.drivers.alternating.alternate_projections`.
+
+``docs/methods/heeger_bergen.md`` lists the parameters and the deviations from the paper.
+"""
 
 from __future__ import annotations
 
@@ -7,15 +18,16 @@ from typing import Annotated
 import numpy as np
 
 from .._validation import Range
-from ..ops import (
-    ColorPCA,
-    SteerablePyramid,
-    HistogramMatcher,
-    as_channels,
-    periodic_smooth_decomposition,
-)
-from ._base import Progress, TextureSynthesizer
-from ._memory import shape_dims, output_bytes
+from ..drivers.alternating import alternate_projections
+from ..models.histograms import SubbandHistograms, subband_histograms
+from ..ops.canvas import crop_to_output, padded_canvas
+from ..ops.color import ColourSpace, colour_space
+from ..ops.fourier import periodic_smooth_decomposition
+from ..ops.histogram import HistogramMatcher
+from ..ops.progress import Reporter
+from ..transforms.steerable import SteerablePyramid
+from ._base import TextureSynthesizer
+from ._memory import output_bytes, shape_dims
 
 __all__ = ["HeegerBergen"]
 
@@ -27,14 +39,15 @@ class HeegerBergen(TextureSynthesizer):
     pyramid, imposes on every subband (the high-pass and low-pass residuals included) the
     histogram of the exemplar's corresponding subband, reconstructs, and imposes the
     exemplar's pixel histogram. Colour images are processed along the exemplar's principal
-    colour axes (decorrelated channels), as in the IPOL description of Briand et al. 2014.
-    Output sizes that differ from the exemplar's use the exact 1-D optimal-transport
-    histogram target (spec 00, 5.2), so any output size works.
+    colour axes (decorrelated channels, the ``'pca'`` space of :mod:`texsyn.ops.color`), as
+    in the IPOL description of Briand et al. 2014. Output sizes that differ from the
+    exemplar's use the exact 1-D optimal-transport histogram target
+    (:func:`texsyn.ops.histogram.hist_target`), so any output size works.
 
     Parameters
     ----------
     n_scales : int
-        Number of pyramid scales.
+        Number of pyramid scales (levels 0-based, the finest first).
     n_orientations : int
         Number of oriented subbands per scale.
     n_iterations : int
@@ -92,8 +105,8 @@ class HeegerBergen(TextureSynthesizer):
             filters, _ = self._pyramid_bytes(k, c)
             terms["pyramid of the exemplar"] = filters + coefficients + 24.0 * k * c
             return terms
-        side = 2**self.n_scales
-        canvas = float(max(output_shape[0], side)) * float(max(output_shape[1], side))
+        ch, cw = self._canvas(output_shape)
+        canvas = float(ch) * float(cw)
         filters, coefficients = self._pyramid_bytes(canvas, c)
         terms["pyramid filters"] = filters
         terms["histogram targets"] = coefficients + 8.0 * c * canvas
@@ -102,47 +115,38 @@ class HeegerBergen(TextureSynthesizer):
         terms["output image"] = output_bytes(c, output_shape)
         return terms
 
+    def _canvas(self, shape: tuple[int, int]) -> tuple[int, int]:
+        """The working canvas: the output, at least ``2^n_scales`` pixels per side."""
+        return padded_canvas(shape, minimum=2**self.n_scales)
+
     def _fit(self, exemplar: np.ndarray) -> None:
-        ex = as_channels(exemplar)
-        self.pca_ = ColorPCA(ex) if ex.shape[2] > 1 else None
-        coords = self.pca_.forward(ex) if self.pca_ is not None else ex
+        self.colour_space_: ColourSpace = colour_space("pca", exemplar)
+        coords = self.colour_space_.forward(exemplar)
         base = periodic_smooth_decomposition(coords)[0] if self.periodic_component else coords
-        pyramid = SteerablePyramid(ex.shape[:2], self.n_scales, self.n_orientations).forward(base)
-        channels = ex.shape[2]
-        self.band_values_ = {
-            key: [np.sort(band[..., c], axis=None) for c in range(channels)]
-            for key, band in pyramid.items()
-        }
-        self.pixel_values_ = [np.sort(coords[..., c], axis=None) for c in range(channels)]
+        self.model_: SubbandHistograms = subband_histograms(
+            coords, base, n_scales=self.n_scales, n_orientations=self.n_orientations
+        )
 
-    def _sample(self, shape, rng, callback):
-        side = 2**self.n_scales
-        canvas = (max(shape[0], side), max(shape[1], side))
-        channels = len(self.pixel_values_)
-        pyr = SteerablePyramid(canvas, self.n_scales, self.n_orientations)
-        match_pixels = HistogramMatcher(self.pixel_values_, canvas[0] * canvas[1])
-        match_band = {
-            key: HistogramMatcher(values, _band_size(pyr, key)) for key, values in self.band_values_.items()
-        }
+    def _step(self, pyramid: SteerablePyramid, match_pixels: HistogramMatcher, match_band: dict):
+        """One iteration of the paper's loop: analyse, match every subband, reconstruct, match pixels."""
 
-        image = match_pixels(rng.standard_normal(canvas + (channels,)))
-        for it in range(self.n_iterations):
-            coeffs = pyr.forward(image)
+        def step(image: np.ndarray, iteration: int) -> np.ndarray:
+            coeffs = pyramid.forward(image)
             for key, band in coeffs.items():
                 coeffs[key] = match_band[key](band)
-            image = match_pixels(pyr.inverse(coeffs))
-            if callback is not None:
-                callback(Progress("iteration", it + 1, self.n_iterations))
-        if self.pca_ is not None:
-            image = self.pca_.inverse(image)
-        return image[: shape[0], : shape[1]], None
+            return match_pixels(pyramid.inverse(coeffs))
 
+        return step
 
-def _band_size(pyr: SteerablePyramid, key) -> int:
-    if key == "highpass":
-        h, w = pyr.sizes[0]
-    elif key == "lowpass":
-        h, w = pyr.sizes[-1]
-    else:
-        h, w = pyr.sizes[key[0]]
-    return h * w
+    def _sample(self, shape, rng, callback):
+        canvas = self._canvas(shape)
+        pyramid = SteerablePyramid(canvas, self.n_scales, self.n_orientations)
+        match_pixels, match_band = self.model_.matchers(pyramid)
+        noise = match_pixels(rng.standard_normal(canvas + (self.model_.channels,)))
+        image = alternate_projections(
+            noise,
+            self._step(pyramid, match_pixels, match_band),
+            self.n_iterations,
+            reporter=Reporter(callback, "iteration", self.n_iterations),
+        )
+        return crop_to_output(self.colour_space_.inverse(image), shape), None

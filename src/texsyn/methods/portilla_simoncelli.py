@@ -1,32 +1,148 @@
-"""Portilla-Simoncelli texture synthesis, grey or colour with cross-channel statistics.
+"""Portilla–Simoncelli texture synthesis, grey or colour with cross-channel statistics.
 
-The exemplar is summarised by the joint statistics of its complex steerable pyramid
-(:func:`texsyn.ops.portilla.ps_statistics`: marginal moments, auto-correlations of the
-partially reconstructed low-passes, magnitude auto- and cross-correlations across
-orientations, scales and channels, cross-scale phase statistics); synthesis imposes them on
-white noise by alternating projections (:func:`texsyn.ops.portilla.ps_synthesis`).
+The algorithm of J. Portilla, E. Simoncelli, "A parametric texture model based on joint
+statistics of complex wavelet coefficients", IJCV 40(1), 2000, and where each step is:
 
-References
-----------
-J. Portilla, E. Simoncelli, "A parametric texture model based on joint statistics of complex
-wavelet coefficients", IJCV 40(1), 2000, sections 3-4. Colour: J. Vacher, T. Briand, "The
-Portilla-Simoncelli texture model: towards understanding the early visual cortex", IPOL 2021.
+1. measure the exemplar's statistics on a complex steerable pyramid (section 3): ``fit`` calls
+   :func:`texsyn.models.portilla.ps_statistics` and keeps a frozen
+   :class:`texsyn.models.portilla.PSStatistics`;
+2. start from Gaussian noise with the exemplar's mean and variance: :meth:`PortillaSimoncelli._sample`;
+3. repeat (section 4): analyse, impose the statistics coarse to fine, reconstruct, impose
+   the pixel statistics: :func:`project_statistics` (the projections are in
+   :mod:`texsyn.models.portilla_projections`), run by :func:`ps_synthesis` with
+   :func:`texsyn.drivers.alternating.alternate_projections`.
+
+Colour follows J. Vacher, T. Briand, "The Portilla-Simoncelli texture model: towards
+understanding the early visual cortex", IPOL 2021: the statistics of the principal colour
+axes with every cross-channel correlation. ``docs/methods/portilla_simoncelli.md`` lists the
+parameters and the deviations from the paper.
 """
 
 from __future__ import annotations
 
-from typing import Annotated, Callable
+from collections.abc import Callable
+from typing import Annotated
 
 import numpy as np
 
 from .._validation import OneOf, Range, as_exemplar
-from ..ops import ColorPCA, as_channels, luma, periodic_smooth_decomposition
-from ..ops.portilla import ComplexSteerablePyramid, PSStatistics, pixel_statistics, ps_statistics, ps_synthesis
-from ._base import Progress, TextureSynthesizer
-from ._memory import shape_dims, output_bytes
+from ..drivers.alternating import alternate_projections
+from ..models.portilla import PSStatistics, parent_features, ps_statistics
+from ..models.portilla_projections import (
+    impose_lowpass_statistics,
+    impose_magnitude_statistics,
+    impose_parent_regression,
+    impose_pixel_statistics,
+    shrink_highpass,
+)
+from ..ops.canvas import crop_to_output, padded_canvas
+from ..ops.color import ColourSpace, colour_space
+from ..ops.fourier import periodic_smooth_decomposition
 from ..ops.linalg import fixed_order
+from ..ops.patches import as_channels
+from ..ops.progress import Progress, Reporter
+from ..transforms.complex_steerable import ComplexSteerablePyramid
+from ._base import TextureSynthesizer
+from ._memory import output_bytes, shape_dims
 
-__all__ = ["PortillaSimoncelli"]
+__all__ = ["PortillaSimoncelli", "project_statistics", "projection_step", "ps_synthesis"]
+
+
+def project_statistics(
+    x: np.ndarray, target: PSStatistics, pyramid: ComplexSteerablePyramid, lags: int
+) -> np.ndarray:
+    """One Portilla–Simoncelli iteration on channels ``(C, H, W)`` (paper section 4).
+
+    Analyse the image; impose on the low-pass residual its auto-correlation, skewness and
+    kurtosis; then from the coarsest scale to the finest: the magnitude statistics of the
+    scale's bands (correlations across orientations, channels and with the parent scale,
+    auto-correlation, mean), the correlation of their real parts with the phase-doubled
+    parents, and, after adding the scale to the partial reconstruction, that image's
+    auto-correlation, skewness and kurtosis; shrink the high-pass residual to its variance;
+    reconstruct; impose the pixel statistics (mean, colour covariance, skewness, kurtosis,
+    range).
+    """
+    n_scales = pyramid.n_scales
+    pixel_var = target.pixel_moments[:, 1]
+    highpass, bands, lows, spectra = pyramid.forward(x, spectra=True, all_lows=False)
+    lows[-1] = lows[-1] - lows[-1].mean(axis=(-2, -1), keepdims=True)
+    image = impose_lowpass_statistics(
+        pyramid.lowpass_image(lows[-1]),
+        target.low_autocorr[n_scales],
+        target.low_skew_kurt[:, n_scales],
+        pixel_var,
+        lags,
+    )
+    for s in range(n_scales - 1, -1, -1):
+        parent_mags, parent_reals = parent_features(pyramid, spectra, lows, s)
+        band = impose_magnitude_statistics(bands[s], target, s, parent_mags, lags)
+        if s < n_scales - 1:
+            c, k = band.shape[:2]
+            n = band.shape[-1] * band.shape[-2]
+            reals = impose_parent_regression(
+                band.real.reshape(c * k, n).T, parent_reals, target.real_parent[s]
+            )
+            real = reals.T.reshape(band.shape)
+        else:
+            real = band.real
+        real_spectra = pyramid.fft(real)
+        bands[s], spectra[s] = pyramid.analytic(real, s, real_spectra=real_spectra)
+        image = pyramid.reconstruct_level(image, real, s, real_spectra=real_spectra)
+        image = impose_lowpass_statistics(
+            image, target.low_autocorr[s], target.low_skew_kurt[:, s], pixel_var, lags
+        )
+    x = pyramid.reconstruct(image, shrink_highpass(highpass, target.highpass_variance))
+    return impose_pixel_statistics(x, target)
+
+
+def ps_synthesis(
+    target: PSStatistics,
+    initial: np.ndarray,
+    n_iterations: int,
+    *,
+    lags: int = 3,
+    pyramid: ComplexSteerablePyramid | None = None,
+    reporter: Reporter | None = None,
+    preview: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> np.ndarray:
+    """Portilla–Simoncelli alternating projections from ``initial`` (``(C, H, W)``), paper section 4.
+
+    Parameters
+    ----------
+    target : PSStatistics
+        The statistics to impose.
+    initial : ndarray, shape (C, H, W)
+        Starting channels (any size).
+    n_iterations : int
+        Number of :func:`project_statistics` passes.
+    lags : int
+        Half-width of the auto-correlation windows the statistics were measured with.
+    pyramid : ComplexSteerablePyramid, optional
+        A pyramid of the channels' size (a single-precision one is built when omitted).
+    reporter : Reporter, optional
+        Receives one record per iteration.
+    preview : callable, optional
+        Turns the channels into the image shown with each record.
+
+    Returns
+    -------
+    ndarray, shape (C, H, W)
+    """
+    x = np.asarray(initial, dtype=np.float64).copy()
+    if pyramid is None:
+        pyramid = ComplexSteerablePyramid(x.shape[1:], target.n_scales, target.n_orientations, single=True)
+    step = projection_step(target, pyramid, lags)
+    return alternate_projections(x, step, n_iterations, reporter=reporter, preview=preview)
+
+
+def projection_step(target: PSStatistics, pyramid: ComplexSteerablePyramid, lags: int):
+    """The step ``step(x, iteration) -> x`` that :func:`ps_synthesis` gives the driver."""
+
+    def step(x: np.ndarray, iteration: int) -> np.ndarray:
+        return project_statistics(x, target, pyramid, lags)
+
+    return step
+
 
 class PortillaSimoncelli(TextureSynthesizer):
     """Portilla-Simoncelli synthesis by alternating projections onto the joint statistics.
@@ -46,7 +162,8 @@ class PortillaSimoncelli(TextureSynthesizer):
     n_iterations : int
         Alternating-projection iterations (the paper uses 50).
     colour : str
-        'joint' (colour with cross-channel statistics) or 'grey' (luma only).
+        'joint' (the exemplar's principal colour axes with every cross-channel statistic;
+        the ``'pca'`` space of :mod:`texsyn.ops.color`) or 'grey' (luma only, grey output).
     """
 
     name = "portilla_simoncelli"
@@ -78,29 +195,24 @@ class PortillaSimoncelli(TextureSynthesizer):
 
     # ------------------------------------------------------------------ model
     def _to_channels(self, image: np.ndarray) -> np.ndarray:
-        """Image ``(H, W[, 3])`` to model channels ``(C, H, W)`` (principal colour axes)."""
-        img = as_channels(np.asarray(image, dtype=np.float64))
-        if self.pca_ is not None:
-            if img.shape[2] == 1:
-                img = np.repeat(img, 3, axis=2)
-            return np.moveaxis(self.pca_.forward(img), -1, 0)
-        if img.shape[2] == 3:
-            img = luma(img)[..., None]
-        return np.moveaxis(img, -1, 0)
+        """Image ``(H, W[, 3])`` to model channels ``(C, H, W)`` (the colour space's coordinates)."""
+        return np.moveaxis(self.colour_space_.forward(image), -1, 0)
 
     def _to_image(self, channels: np.ndarray) -> np.ndarray:
-        img = np.moveaxis(channels, 0, -1)
-        return self.pca_.inverse(img) if self.pca_ is not None else img[..., 0]
+        return self.colour_space_.inverse(np.moveaxis(channels, 0, -1))
 
     def _fit(self, exemplar: np.ndarray) -> None:
-        ex = as_channels(exemplar)
-        self.pca_ = ColorPCA(ex) if ex.shape[2] == 3 and self.colour == "joint" else None
+        self.colour_space_: ColourSpace = colour_space(self.colour, exemplar)
         coords = self._to_channels(exemplar)
         periodic = periodic_smooth_decomposition(np.moveaxis(coords, 0, -1))[0]
-        stats = ps_statistics(periodic, n_scales=self.n_scales, n_orientations=self.n_orientations, lags=self.lags)
         # pixel statistics of the exemplar itself; everything spatial from its periodic part
-        stats.pixel_moments, stats.pixel_range, stats.colour_covariance = pixel_statistics(coords)
-        self.statistics_: PSStatistics = stats
+        self.statistics_: PSStatistics = ps_statistics(
+            periodic,
+            n_scales=self.n_scales,
+            n_orientations=self.n_orientations,
+            lags=self.lags,
+            pixels=coords,
+        )
 
     # ------------------------------------------------------------------ memory
     def memory_terms(self, exemplar_shape, output_shape=None) -> dict[str, float]:
@@ -119,22 +231,28 @@ class PortillaSimoncelli(TextureSynthesizer):
             return terms
         ch, cw = self._canvas(output_shape)
         canvas = float(ch) * float(cw)
-        terms["pyramids of one iteration"] = canvas * (100.0 + channels * (110.0 + 150.0 * self.n_orientations))
+        terms["pyramids of one iteration"] = canvas * (
+            100.0 + channels * (110.0 + 150.0 * self.n_orientations)
+        )
         terms["output image"] = output_bytes(c, output_shape)
         return terms
 
     # ------------------------------------------------------------------ synthesis
     def _canvas(self, shape: tuple[int, int]) -> tuple[int, int]:
-        side = 2 ** (self.n_scales + 1)
-        return max(shape[0], side), max(shape[1], side)
+        """The working canvas: the output, at least ``2^(n_scales + 1)`` pixels per side."""
+        return padded_canvas(shape, minimum=2 ** (self.n_scales + 1))
 
     def _run(self, initial: np.ndarray, iterations: int, callback) -> np.ndarray:
         pyramid = ComplexSteerablePyramid(initial.shape[1:], self.n_scales, self.n_orientations, single=True)
-        def report(k, x):
-            if callback is not None:
-                callback(Progress("iteration", k, iterations, image=self._to_image(x)))
-
-        return ps_synthesis(self.statistics_, initial, iterations, lags=self.lags, pyramid=pyramid, callback=report)
+        return ps_synthesis(
+            self.statistics_,
+            initial,
+            iterations,
+            lags=self.lags,
+            pyramid=pyramid,
+            reporter=Reporter(callback, "iteration", iterations),
+            preview=self._to_image,
+        )
 
     def _sample(self, shape, rng, callback):
         h, w = self._canvas(shape)
@@ -142,7 +260,7 @@ class PortillaSimoncelli(TextureSynthesizer):
         noise = rng.standard_normal((moments.shape[0], h, w))
         initial = moments[:, 0, None, None] + np.sqrt(moments[:, 1])[:, None, None] * noise
         out = self._run(initial, self.n_iterations, callback)
-        return self._to_image(out)[: shape[0], : shape[1]], None
+        return crop_to_output(self._to_image(out), shape), None
 
     @fixed_order
     def refine(
@@ -164,9 +282,11 @@ class PortillaSimoncelli(TextureSynthesizer):
         exemplar = self._require_fitted()
         img = np.asarray(as_exemplar(image, name="image"), dtype=np.float64)
         h, w = img.shape[:2]
-        self._check_memory(exemplar.shape, (h, w), task=f"refining a {w}x{h} image", advice="use a smaller image")
+        self._check_memory(
+            exemplar.shape, (h, w), task=f"refining a {w}x{h} image", advice="use a smaller image"
+        )
         ch, cw = self._canvas((h, w))
         padded = np.pad(as_channels(img), ((0, ch - h), (0, cw - w), (0, 0)), mode="symmetric")
         iterations = self.n_iterations if n_iterations is None else int(n_iterations)
-        return self._as_output(self._to_image(self._run(self._to_channels(padded), iterations, callback))[:h, :w])
-
+        out = self._run(self._to_channels(padded), iterations, callback)
+        return self._as_output(crop_to_output(self._to_image(out), (h, w)))

@@ -1,13 +1,19 @@
-"""Portilla-Simoncelli statistics as a texture descriptor and distance."""
+"""Portilla–Simoncelli statistics as a texture descriptor and distance.
+
+The statistics are those the ``portilla_simoncelli`` method imposes
+(:mod:`texsyn.models.portilla`, ``docs/methods/portilla_simoncelli.md``), measured here on
+an image's RGB channels as given.
+"""
 
 from __future__ import annotations
 
 import numpy as np
 
 from .._validation import as_exemplar
-from ..ops.portilla import PSStatistics, max_scales
+from ..models.portilla import PSStatistics
+from ..models.portilla import ps_statistics as model_statistics
 from ..ops.linalg import fixed_order
-from ..ops.portilla import ps_statistics as _ps_statistics
+from ..transforms.steerable import max_scales
 from .texture import check_pair
 
 __all__ = ["ps_distance", "ps_statistics"]
@@ -24,7 +30,7 @@ def ps_statistics(image, *, n_scales: int = 4, n_orientations: int = 4, lags: in
     """
     img = np.asarray(as_exemplar(image, name="image"), dtype=np.float64)
     scales = max_scales(img.shape[:2], n_scales)
-    return _ps_statistics(img, n_scales=scales, n_orientations=n_orientations, lags=lags)
+    return model_statistics(img, n_scales=scales, n_orientations=n_orientations, lags=lags)
 
 
 @fixed_order
@@ -37,14 +43,17 @@ def ps_distance(image, exemplar, *, n_scales: int = 4, n_orientations: int = 4, 
     """
     img, ex = check_pair(image, exemplar)
     scales = min(max_scales(img.shape[:2], n_scales), max_scales(ex.shape[:2], n_scales))
-    kwargs = {"n_scales": scales, "n_orientations": n_orientations, "lags": lags}
-    a = _ps_statistics(img[..., 0] if img.shape[2] == 1 else img, **kwargs).groups()
-    b = _ps_statistics(ex[..., 0] if ex.shape[2] == 1 else ex, **kwargs).groups()
+    a = model_statistics(
+        img[..., 0] if img.shape[2] == 1 else img, n_scales=scales, n_orientations=n_orientations, lags=lags
+    ).groups()
+    b = model_statistics(
+        ex[..., 0] if ex.shape[2] == 1 else ex, n_scales=scales, n_orientations=n_orientations, lags=lags
+    ).groups()
     out = []
     for key, ref in b.items():
         other = a[key]
         if other.shape != ref.shape:  # auto-correlation windows cut by a smaller image
             n = min(other.size, ref.size)
             other, ref = other[:n], ref[:n]
-        out.append(np.linalg.norm(other - ref) / max(np.linalg.norm(ref), 1e-12))
+        out.append(np.linalg.norm(other - ref) / max(float(np.linalg.norm(ref)), 1e-12))
     return float(np.mean(out))

@@ -1,6 +1,15 @@
-"""Stateless building blocks shared by every method (spec 00). Each exists once here."""
+"""Layer 3, ops: stateless numerical building blocks and shared policies, each written once.
 
-from .color import ColorPCA, luma, rgb_to_yuv, yuv_to_rgb
+See ``docs/architecture.md``. The pyramids and the steerable pyramid moved to
+:mod:`texsyn.transforms`; their old names here (``SteerablePyramid``, ``Pyramid``,
+``crop_to_multiple``, ``gaussian_blur``, ``gaussian_pyramid``, ``zoom_in``, ``zoom_out``) still
+resolve, with a :class:`DeprecationWarning`, through the module ``__getattr__`` below.
+"""
+
+import importlib
+import warnings
+
+from .color import ColorPCA, ColourSpace, colour_space, luma, rgb_to_yuv, yuv_to_rgb
 from .fourier import periodic_smooth_decomposition
 from .histogram import (
     HistogramMatcher,
@@ -20,7 +29,7 @@ from .patches import (
     wrap_seam_ratio,
 )
 from .positions import position_colors
-from .pyramids import crop_to_multiple, gaussian_blur, gaussian_pyramid, zoom_in, zoom_out
+from .seams import boundary_cut_mask, cumulative_path_cost, min_path, overlap_error
 from .search import (
     FFTPatchSearch,
     NearestPatchIndex,
@@ -29,26 +38,21 @@ from .search import (
     knn_select,
     nearest_both_ways,
 )
-from .seams import boundary_cut_mask, cumulative_path_cost, min_path, overlap_error
-from .steerable import Pyramid, SteerablePyramid
 
 __all__ = [
     "ColorPCA",
+    "ColourSpace",
     "FFTPatchSearch",
     "NearestPatchIndex",
     "HistogramMatcher",
-    "Pyramid",
-    "SteerablePyramid",
     "WeightedPatchBank",
     "as_channels",
     "average_patches",
     "boundary_cut_mask",
-    "crop_to_multiple",
+    "colour_space",
     "cumulative_path_cost",
     "extend_index",
     "extract_patches",
-    "gaussian_blur",
-    "gaussian_pyramid",
     "hist_target",
     "knn_patches",
     "knn_select",
@@ -67,6 +71,24 @@ __all__ = [
     "transport_energy",
     "wrap_seam_ratio",
     "yuv_to_rgb",
-    "zoom_in",
-    "zoom_out",
 ]
+
+#: names this package re-exported before they moved to ``texsyn.transforms`` (deprecated here)
+_MOVED = {
+    "Pyramid": "texsyn.transforms.steerable",
+    "SteerablePyramid": "texsyn.transforms.steerable",
+    "crop_to_multiple": "texsyn.transforms.pyramids",
+    "gaussian_blur": "texsyn.transforms.pyramids",
+    "gaussian_pyramid": "texsyn.transforms.pyramids",
+    "zoom_in": "texsyn.transforms.pyramids",
+    "zoom_out": "texsyn.transforms.pyramids",
+}
+
+
+def __getattr__(name: str):
+    """Resolve the names that moved to :mod:`texsyn.transforms`, with a deprecation warning."""
+    module = _MOVED.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    warnings.warn(f"texsyn.ops.{name} is deprecated; use {module}.{name}", DeprecationWarning, stacklevel=2)
+    return getattr(importlib.import_module(module), name)

@@ -1,6 +1,7 @@
 """Orientation and flow fields: structure tensor, sign optimisation, association fields.
 
-The geometric layer of Peyré's grouplet model (Peyré 2008, section 2.1; spec 03, section 4).
+The geometric layer of Peyré's grouplet model (Peyré 2008, section 2.1;
+``docs/methods/grouplets.md``, "Geometric layer").
 Vector fields are arrays ``(H, W, 2)`` with ``(row, col)`` components; every operation is
 periodic.
 """
@@ -27,7 +28,7 @@ __all__ = [
 def structure_tensor_orientation(
     image: np.ndarray, *, sigma: float = 5.0, presmooth: float = 1.0
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Dominant orientation of a grey image from its smoothed structure tensor (spec 03, 4.1).
+    """Dominant orientation of a grey image from its smoothed structure tensor (Peyré 2008, section 2.1).
 
     The vector ``v = (-g_c, g_r)`` orthogonal to the gradient of the pre-smoothed image is
     averaged as the tensor ``G_sigma * (v v^T)``; its dominant eigenvector gives the direction
@@ -40,7 +41,11 @@ def structure_tensor_orientation(
     coherence : ndarray, shape (H, W)
         ``(lambda+ - lambda-) / (lambda+ + lambda-)`` in [0, 1] (0: isotropic).
     """
-    g = gaussian_filter(np.asarray(image, dtype=np.float64), presmooth, mode="wrap") if presmooth > 0 else np.asarray(image, dtype=np.float64)
+    g = (
+        gaussian_filter(np.asarray(image, dtype=np.float64), presmooth, mode="wrap")
+        if presmooth > 0
+        else np.asarray(image, dtype=np.float64)
+    )
     gr = 0.5 * (np.roll(g, -1, axis=0) - np.roll(g, 1, axis=0))
     gc = 0.5 * (np.roll(g, -1, axis=1) - np.roll(g, 1, axis=1))
     vr, vc = -gc, gr
@@ -95,17 +100,20 @@ def _propagate_signs(vr, vc, start_r, start_c):
 
 
 def orient_field(orientation: np.ndarray, start: tuple[int, int] | None = None) -> np.ndarray:
-    """Turn an orientation field (defined up to sign) into a direction field (spec 03, 4.2).
+    """Turn an orientation field (defined up to sign) into a direction field (Peyré 2008, section 2.1).
 
     Front propagation from ``start`` (the centre by default) with a priority that grows with
     ``1 - |<v, step>|``: the front runs along the flow lines, each newly reached vector is
     flipped to agree with its already-visited neighbours, and the remaining sign changes end up
-    along integral lines (Peyré 2008, section 2.1, "optimised to align the singularities").
+    along integral lines (Peyré 2008, section 2.1, "optimised to align the singularities"; the
+    paper defers the rule to another preprint, this one is ours: ``docs/methods/grouplets.md``).
     """
     o = np.asarray(orientation, dtype=np.float64)
     h, w = o.shape[:2]
     r0, c0 = (h // 2, w // 2) if start is None else start
-    out_r, out_c = _propagate_signs(np.ascontiguousarray(o[..., 0]), np.ascontiguousarray(o[..., 1]), int(r0), int(c0))
+    out_r, out_c = _propagate_signs(
+        np.ascontiguousarray(o[..., 0]), np.ascontiguousarray(o[..., 1]), int(r0), int(c0)
+    )
     return np.stack([out_r, out_c], axis=-1)
 
 
@@ -187,7 +195,7 @@ def _integrate(ur, uc, mask, levels, step):
 
 
 def association_fields(flow: np.ndarray, levels: int, *, step: float = 0.25) -> np.ndarray:
-    """Discrete association fields ``A_l(x) = [phi_x(2^l)]`` of a flow (Peyré 2008 section 2.1; spec 03, 4.3).
+    """Discrete association fields ``A_l(x) = [phi_x(2^l)]`` of a flow (Peyré 2008, section 2.1).
 
     The flow lines of the normalised field are integrated with RK4 (``step`` px) through a
     bilinear interpolation that flips each corner vector to agree with the current heading
@@ -216,7 +224,9 @@ def association_fields(flow: np.ndarray, levels: int, *, step: float = 0.25) -> 
     mask = norm <= 1e-6 * norm.max()
     unit = v / np.maximum(norm, 1e-12)[..., None]
     unit[mask] = 0.0
-    return _integrate(np.ascontiguousarray(unit[..., 0]), np.ascontiguousarray(unit[..., 1]), mask, int(levels), float(step))
+    return _integrate(
+        np.ascontiguousarray(unit[..., 0]), np.ascontiguousarray(unit[..., 1]), mask, int(levels), float(step)
+    )
 
 
 def builtin_flow(name: str, shape: tuple[int, int]) -> np.ndarray:
@@ -242,10 +252,11 @@ def builtin_flow(name: str, shape: tuple[int, int]) -> np.ndarray:
     if key.startswith("constant"):
         _, _, text = key.partition(":")
         try:
-            degrees = float(text) if text else (0.0 if key == "constant" else math.nan)  # 'constant:' names no angle
+            # 'constant:' with nothing after the colon names no angle
+            degrees = float(text) if text else (0.0 if key == "constant" else math.nan)
         except ValueError:
             degrees = math.nan
-        if key[len("constant"):][:1] not in ("", ":") or not math.isfinite(degrees):
+        if key[len("constant") :][:1] not in ("", ":") or not math.isfinite(degrees):
             raise InputError(
                 f"flow 'constant:ANGLE' needs ANGLE as a finite number of degrees (e.g. constant:30), got {name!r}"
             )
@@ -255,7 +266,12 @@ def builtin_flow(name: str, shape: tuple[int, int]) -> np.ndarray:
         # two sources and two vortices with Gaussian envelopes, on wrapped displacements
         field = np.zeros((h, w, 2))
         spread = 0.12 * min(h, w)
-        for cr, cc, kind in ((0.25, 0.25, "source"), (0.75, 0.75, "source"), (0.25, 0.75, "vortex"), (0.75, 0.25, "vortex")):
+        for cr, cc, kind in (
+            (0.25, 0.25, "source"),
+            (0.75, 0.75, "source"),
+            (0.25, 0.75, "vortex"),
+            (0.75, 0.25, "vortex"),
+        ):
             dr = np.mod(r - cr * h + h / 2, h) - h / 2
             dc = np.mod(c - cc * w + w / 2, w) - w / 2
             dist = np.sqrt(dr**2 + dc**2) + 1e-9
@@ -265,4 +281,6 @@ def builtin_flow(name: str, shape: tuple[int, int]) -> np.ndarray:
         return field
     if key == "waves":
         return np.stack([0.6 * np.cos(2 * np.pi * 2 * c / w), np.ones((h, w))], axis=-1)
-    raise InputError(f"unknown flow {name!r}; choose 'learned', 'vortex', 'constant:ANGLE', 'sources' or 'waves'")
+    raise InputError(
+        f"unknown flow {name!r}; choose 'learned', 'vortex', 'constant:ANGLE', 'sources' or 'waves'"
+    )

@@ -1,7 +1,8 @@
-"""Stam's stable fluids on a periodic grid: advection, implicit diffusion, projection (spec 03, 10).
+"""Stam's stable fluids on a periodic grid: advection, implicit diffusion, projection.
 
-Used by Peyré 2008 (Table 2) to evolve the flow that drives a dynamic texture. Vector fields
-are ``(H, W, 2)`` arrays of ``(row, col)`` components in pixels per time unit.
+Used by Peyré 2008 (section 4, Table 2) to evolve the flow that drives a dynamic texture
+(``docs/methods/grouplets.md``, "Dynamic synthesis"). Vector fields are ``(H, W, 2)`` arrays
+of ``(row, col)`` components in pixels per time unit.
 """
 
 from __future__ import annotations
@@ -33,7 +34,10 @@ def advect(field: np.ndarray, velocity: np.ndarray, tau: float = 1.0, *, order: 
     coords = np.stack([r - tau * u[..., 0], c - tau * u[..., 1]])
     if g.ndim == 2:
         return map_coordinates(g, coords, order=order, mode="grid-wrap")
-    return np.stack([map_coordinates(g[..., k], coords, order=order, mode="grid-wrap") for k in range(g.shape[2])], axis=-1)
+    return np.stack(
+        [map_coordinates(g[..., k], coords, order=order, mode="grid-wrap") for k in range(g.shape[2])],
+        axis=-1,
+    )
 
 
 def diffuse(field: np.ndarray, amount: float) -> np.ndarray:
@@ -54,7 +58,7 @@ def divergence(velocity: np.ndarray) -> np.ndarray:
 
 
 def project(velocity: np.ndarray) -> np.ndarray:
-    """Projection onto divergence-free fields (Peyré 2008, eq. 5; spec 03, 10).
+    """Projection onto divergence-free fields (Peyré 2008, section 4, eq. 5).
 
     Solves ``Laplacian p = div V`` by FFT and returns ``V - grad p`` with the forward-difference
     gradient; since ``div(grad)`` is exactly the 5-point Laplacian, the divergence of the

@@ -1,4 +1,11 @@
-"""Histogram matching and 1-D optimal transport (spec 00, section 5)."""
+"""Histogram matching and 1-D optimal transport.
+
+Matching the histogram of ``n`` values to a reference of ``N_y`` values is the 1-D optimal
+transport between their empirical measures: the sorted values are mapped monotonically
+(Peyré 2008, eq. 4; Tartavel et al. 2013, section 3). When the sizes differ the
+target of each rank is the barycentre of the reference mass the monotone plan sends to it
+(:func:`hist_target`), so any output size works (``docs/methods/heeger_bergen.md``).
+"""
 
 from __future__ import annotations
 
@@ -18,9 +25,7 @@ __all__ = [
 ]
 
 
-def hist_target(
-    n: int, reference: np.ndarray, *, method: str = "ot", presorted: bool = False
-) -> np.ndarray:
+def hist_target(n: int, reference: np.ndarray, *, method: str = "ot", presorted: bool = False) -> np.ndarray:
     """The ``n`` sorted target values that impose the distribution of ``reference``.
 
     Parameters
@@ -31,7 +36,7 @@ def hist_target(
         Reference values (any shape, flattened), of any length ``N_y``.
     method : {'ot', 'interp'}
         ``'ot'``: exact 1-D optimal transport target, the barycentric projection of the
-        monotone plan between the uniform measures on ``n`` and ``N_y`` points (spec 00, 5.2);
+        monotone plan between the uniform measures on ``n`` and ``N_y`` points;
         for ``n == N_y`` it is ``sort(reference)``. ``'interp'``: quantile interpolation.
     presorted : bool
         Whether ``reference`` is already sorted ascending (skips a sort).
@@ -68,8 +73,8 @@ def match_sorted(
     """Give ``values`` the sorted ``target_sorted`` values in the order of their ranks.
 
     The result is the orthogonal projection of ``values`` onto the permutations of the target
-    (Peyre 2008, eq. 4; spec 00, 5.1). Ties are broken by position, or at random when ``rng``
-    is given (spec 00, 5.3).
+    (Peyre 2008, eq. 4). Ties are broken by position, or at random when ``rng``
+    is given.
     """
     x = np.asarray(values)
     flat = x.ravel()
@@ -115,7 +120,7 @@ def match_histogram(
     method: str = "ot",
     rng: np.random.Generator | None = None,
 ) -> np.ndarray:
-    """Impose the histogram of ``reference`` on ``values`` (any sizes; spec 00, 5.1-5.3).
+    """Impose the histogram of ``reference`` on ``values`` (any sizes, see :func:`hist_target`).
 
     For equal sizes the result holds exactly the reference values, rearranged.
     """
@@ -126,7 +131,7 @@ def match_histogram(
 class HistogramMatcher:
     """Impose fixed per-channel histograms, optionally along principal colour axes.
 
-    The targets for ``n_values`` samples per channel are computed once (spec 00, 5.2), so an
+    The targets for ``n_values`` samples per channel are computed once (:func:`hist_target`), so an
     iterative method can project at every step at the cost of one sort per channel.
 
     Parameters
@@ -136,7 +141,7 @@ class HistogramMatcher:
     n_values : int
         Number of samples per channel of the images to be matched.
     pca : ColorPCA, optional
-        Match along these axes (spec 00, 5.5) instead of the channels themselves.
+        Match along these axes (:class:`texsyn.ops.color.ColorPCA`) instead of the channels themselves.
     method : {'ot', 'interp'}
     """
 
@@ -163,7 +168,7 @@ def match_histogram_pca(
     method: str = "ot",
     rng: np.random.Generator | None = None,
 ) -> np.ndarray:
-    """Colour histogram matching along the reference's principal colour axes (spec 00, 5.5).
+    """Colour histogram matching along the reference's principal colour axes.
 
     Parameters
     ----------
@@ -174,12 +179,15 @@ def match_histogram_pca(
     pca = ColorPCA(reference) if pca is None else pca
     ref = pca.forward(reference).reshape(-1, np.shape(reference)[-1])
     n_values = int(np.prod(np.shape(image)[:-1]))
-    matcher = HistogramMatcher([np.sort(ref[:, c]) for c in range(ref.shape[1])], n_values, pca=pca, method=method)
+    matcher = HistogramMatcher(
+        [np.sort(ref[:, c]) for c in range(ref.shape[1])], n_values, pca=pca, method=method
+    )
     return matcher(image, rng)
 
 
 def transport_energy(x: np.ndarray, y: np.ndarray) -> float:
-    """``N W_2^2`` between the empirical measures of ``x`` (N values) and ``y`` (spec 00, 5.2).
+    """``N W_2^2`` between the empirical measures of ``x`` (N values) and ``y``
+    (the cost of the monotone plan of :func:`hist_target`).
 
     For equal sizes this is ``sum((sort(x) - sort(y))^2)``.
     """

@@ -1,0 +1,202 @@
+"""What the grouplet method learns from an exemplar (Peyré 2008, section 3.1).
+
+The model has two layers: a geometric layer, the exemplar's direction field ``Gamma_0``
+(section 2.1), and a coefficient layer, the sorted values of every band of the exemplar's
+wavelet-grouplet coefficients and of its pixels (the marginals ``D_0``). The model is built
+once by :meth:`GroupletModel.from_exemplar` and never changed afterwards: everything that
+depends on the output size (the histogram targets of section 3.2, eq. 4) is computed per call
+by :meth:`GroupletModel.targets` and held by the caller (``docs/methods/grouplets.md``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..ops import ColorPCA, hist_target, luma, match_sorted_rows, periodic_smooth_decomposition
+from ..ops.flow import association_fields, orient_field, structure_tensor_orientation
+from ..transforms.grouplets import WaveletGroupletTransform
+
+__all__ = ["GroupletModel", "HistogramTargets"]
+
+
+@dataclass(frozen=True)
+class HistogramTargets:
+    """Sorted target values of every constraint of the model for an output of ``n`` pixels.
+
+    The projection of eq. 4 (Peyré 2008, section 3.2) needs as many target values as the
+    output has coefficients; when the exemplar and the output differ in size they are the
+    quantile transport of the exemplar's values (:func:`texsyn.ops.hist_target`).
+
+    Attributes
+    ----------
+    bands : ndarray, shape (B, n)
+        One row per wavelet-grouplet band ``(j, l, channel)``, ascending.
+    pixels : ndarray, shape (C, n)
+        One row per channel, ascending.
+    """
+
+    bands: np.ndarray
+    pixels: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class GroupletModel:
+    """The statistics of Peyré's grouplet model, learned from an exemplar (paper section 3.1).
+
+    Build it with :meth:`from_exemplar`; its arrays are read-only.
+
+    Attributes
+    ----------
+    flow : ndarray (H, W, 2)
+        Learned direction field ``Gamma_0`` (unit vectors, signs optimised).
+    coherence : ndarray (H, W)
+        Anisotropy of the structure tensor, in [0, 1].
+    band_values : ndarray (J+1, L+1, C, H*W)
+        Sorted wavelet-grouplet coefficients of the exemplar's periodic component.
+    pixel_values : ndarray (C, H*W)
+        Sorted pixel values (principal-axis coordinates for colour).
+    levels, grouplet_levels : int
+        ``J`` pyramid detail bands and ``L`` grouplet scales.
+    pca : ColorPCA or None
+        Principal colour axes of a colour exemplar synthesised in colour; ``None`` for grey.
+    """
+
+    flow: np.ndarray
+    coherence: np.ndarray
+    band_values: np.ndarray
+    pixel_values: np.ndarray
+    levels: int
+    grouplet_levels: int
+    pca: ColorPCA | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("flow", "coherence", "band_values", "pixel_values"):
+            array = np.asarray(getattr(self, name))
+            array.setflags(write=False)
+            object.__setattr__(self, name, array)
+
+    @classmethod
+    def from_exemplar(
+        cls,
+        exemplar: np.ndarray,
+        *,
+        levels: int = 3,
+        grouplet_levels: int = 4,
+        sigma: float = 5.0,
+        presmooth: float = 1.0,
+        colour: str = "pca",
+    ) -> GroupletModel:
+        """Learn both layers from an exemplar (section 3.1).
+
+        Parameters
+        ----------
+        exemplar : ndarray, shape (H, W) or (H, W, 3)
+        levels, grouplet_levels : int
+            ``J`` pyramid detail bands and ``L`` grouplet scales.
+        sigma, presmooth : float
+            Structure-tensor smoothing and gradient pre-smoothing (pixels).
+        colour : {'pca', 'grey'}
+            Colour exemplars: synthesise the three principal colour axes with one shared
+            geometry, or convert to grey (``docs/methods/grouplets.md``, "Deviations").
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> stripes = 0.5 + 0.5 * np.sin(np.arange(16)[None, :] * np.ones((16, 1)))
+        >>> model = GroupletModel.from_exemplar(stripes, levels=2, grouplet_levels=2)
+        >>> model.band_values.shape, model.pixel_values.shape
+        ((3, 3, 1, 256), (1, 256))
+        >>> model.flow.flags.writeable
+        False
+        """
+        img = np.asarray(exemplar, dtype=np.float64)  # (H, W) or (H, W, 3)
+        # one periodic component (Moisan) serves the geometry and the statistics: the
+        # decomposition is linear and keeps the mean, so it commutes with luma and colour PCA
+        periodic_img = periodic_smooth_decomposition(img)[0]
+        pca = ColorPCA(img) if img.ndim == 3 and colour == "pca" else None
+        if pca is not None:
+            coords, periodic = pca.forward(img), pca.forward(periodic_img)
+        else:
+            coords, periodic = luma(img)[..., None], luma(periodic_img)[..., None]
+        orientation, coherence = structure_tensor_orientation(
+            luma(periodic_img), sigma=sigma, presmooth=presmooth
+        )
+        flow = orient_field(orientation)
+        transform = _wavelet_grouplets(flow, int(levels), int(grouplet_levels))
+        coefficients = transform.forward(periodic)  # (J+1, L+1, C, H, W)
+        b = coefficients.reshape(coefficients.shape[:3] + (-1,))
+        return cls(
+            flow=flow,
+            coherence=coherence,
+            band_values=np.sort(b, axis=-1),
+            pixel_values=np.sort(coords.reshape(-1, coords.shape[2]).T, axis=-1),
+            levels=int(levels),
+            grouplet_levels=int(grouplet_levels),
+            pca=pca,
+        )
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(H, W)`` of the exemplar."""
+        return (int(self.flow.shape[0]), int(self.flow.shape[1]))
+
+    @property
+    def channels(self) -> int:
+        """Channels synthesised: 3 principal colour axes, or 1 grey channel."""
+        return self.pixel_values.shape[0]
+
+    def transform(self, flow: np.ndarray) -> WaveletGroupletTransform:
+        """The wavelet-grouplet transform along ``flow`` (raw vectors, any size; section 2.3)."""
+        return _wavelet_grouplets(np.asarray(flow, dtype=np.float64), self.levels, self.grouplet_levels)
+
+    def targets(self, n: int) -> HistogramTargets:
+        """Sorted target values of every band and channel for ``n`` pixels (computed, not kept)."""
+        bands = self.band_values.reshape(-1, self.band_values.shape[-1])
+        return HistogramTargets(
+            np.stack([hist_target(n, row, presorted=True) for row in bands]),
+            np.stack([hist_target(n, row, presorted=True) for row in self.pixel_values]),
+        )
+
+    def noise(self, shape: tuple[int, int], rng: np.random.Generator) -> np.ndarray:
+        """White noise ``(H, W, C)`` with the exemplar's mean and deviation per channel."""
+        mean = self.pixel_values.mean(axis=1)
+        std = self.pixel_values.std(axis=1)
+        return mean + std * rng.standard_normal(tuple(shape) + (self.channels,))
+
+    def match_bands(self, coefficients: np.ndarray, targets: HistogramTargets | None = None) -> np.ndarray:
+        """Give every band of ``(J+1, L+1, C, H, W)`` coefficients the exemplar's histogram.
+
+        Table 1, step 3 (eq. 4). ``targets`` from :meth:`targets` (computed here when omitted).
+        """
+        n = coefficients.shape[-1] * coefficients.shape[-2]
+        bands = (self.targets(n) if targets is None else targets).bands
+        rows = coefficients.reshape(-1, n)
+        return match_sorted_rows(rows, bands).reshape(coefficients.shape)
+
+    def match_pixels(self, image: np.ndarray, targets: HistogramTargets | None = None) -> np.ndarray:
+        """Give every channel of an ``(H, W, C)`` image the exemplar's pixel histogram (Table 1, step 5)."""
+        n = image.shape[0] * image.shape[1]
+        pixels = (self.targets(n) if targets is None else targets).pixels
+        return match_sorted_rows(image.reshape(n, self.channels).T, pixels).T.reshape(image.shape)
+
+    def project_once(
+        self, image: np.ndarray, transform: WaveletGroupletTransform, targets: HistogramTargets
+    ) -> np.ndarray:
+        """One pass of Table 1, steps 2-5: analyse, match the bands, synthesise, match the pixels.
+
+        Step 6 of the paper goes back to step 3; the coefficients must be recomputed from the
+        new image, so a pass starts again from the analysis (step 2).
+        """
+        coefficients = self.match_bands(transform.forward(image), targets)
+        return self.match_pixels(transform.inverse(coefficients), targets)
+
+    def to_image(self, channels: np.ndarray) -> np.ndarray:
+        """``(H, W, C)`` model channels (principal-axis coordinates) to an ``(H, W[, 3])`` image."""
+        return self.pca.inverse(channels) if self.pca is not None else channels[..., 0]
+
+
+def _wavelet_grouplets(flow: np.ndarray, levels: int, grouplet_levels: int) -> WaveletGroupletTransform:
+    """The wavelet-grouplet transform along a raw flow: association fields, then the frame."""
+    return WaveletGroupletTransform(association_fields(flow, grouplet_levels), flow.shape[:2], levels)

@@ -1,0 +1,332 @@
+"""The projections that impose Portilla–Simoncelli statistics on an image or its bands.
+
+J. Portilla, E. Simoncelli, IJCV 40(1), 2000, section 4: each set of statistics is imposed
+by the smallest change that reaches it (a gradient step along the statistic for skewness and
+kurtosis, a linear transform for covariances, a filter for auto-correlations). The names in
+parentheses are those of the authors' reference code. The statistics themselves are in
+:mod:`texsyn.models.portilla`; the order in which one synthesis iteration applies these
+projections is :func:`texsyn.methods.portilla_simoncelli.project_statistics`
+(``docs/methods/portilla_simoncelli.md``).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import scipy.fft as sfft
+
+from .portilla import PSStatistics
+
+__all__ = [
+    "adjust_correlation",
+    "adjust_cross_correlation",
+    "fit_window",
+    "impose_autocorrelation",
+    "impose_kurtosis",
+    "impose_lowpass_statistics",
+    "impose_magnitude_statistics",
+    "impose_parent_regression",
+    "impose_pixel_statistics",
+    "impose_skewness",
+    "shrink_highpass",
+]
+
+
+def impose_autocorrelation(x: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """Filter ``x`` so that its central auto-correlation becomes ``target`` (the reference code's ``modacor22``).
+
+    Solves for the symmetric auto-correlation ``c_h`` of a filter such that
+    ``(c_x * c_h)(t) = target(t)`` on the window, then multiplies the spectrum of ``x`` by
+    ``sqrt(|FT c_h|)``. Batched: ``x`` is ``(..., h, w)`` and ``target`` ``(..., a, a)``.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    h, w = x.shape[-2:]
+    batch = x.shape[:-2]
+    lag = (target.shape[-1] - 1) // 2
+    if lag == 0:
+        cur = np.mean(x**2, axis=(-2, -1), keepdims=True)
+        return x * np.sqrt(target[..., :1, :1] / np.where(cur > 0, cur, 1.0))
+    spec = sfft.rfft2(x.astype(np.float32))
+    cx = sfft.irfft2(spec.real**2 + spec.imag**2, s=(h, w)).astype(np.float64) / (h * w)
+    half = _half_offsets(lag)
+    diff = half[:, None, :] - half[None, :, :]
+    summ = half[:, None, :] + half[None, :, :]
+    nonzero = np.any(half != 0, axis=1)
+    a = cx[..., diff[..., 0] % h, diff[..., 1] % w]
+    a = a + np.where(nonzero[None, :], cx[..., summ[..., 0] % h, summ[..., 1] % w], 0.0)
+    b = target[..., half[:, 0] + lag, half[:, 1] + lag]
+    try:
+        coef = np.linalg.solve(a, b[..., None])[..., 0]
+    except np.linalg.LinAlgError:
+        coef = np.stack(
+            [
+                np.linalg.lstsq(ai, bi, rcond=None)[0]
+                for ai, bi in zip(a.reshape((-1,) + a.shape[-2:]), b.reshape(-1, b.shape[-1]))
+            ]
+        ).reshape(b.shape)
+    ch = np.zeros(batch + (h, w))
+    ch[..., half[:, 0] % h, half[:, 1] % w] = coef
+    ch[..., -half[:, 0] % h, -half[:, 1] % w] = coef
+    gain = np.sqrt(np.abs(sfft.rfft2(ch.astype(np.float32)).real))
+    return sfft.irfft2(spec * gain, s=(h, w)).astype(np.float64)
+
+
+@functools.cache
+def _half_offsets(lag: int) -> np.ndarray:
+    """Lags ``(i, j)`` of a ``(2 lag + 1)^2`` window, one of each ``+/-`` pair, zero first."""
+    pairs = [(i, j) for i in range(-lag, lag + 1) for j in range(-lag, lag + 1) if (i, j) >= (0, 0)]
+    return np.array(pairs, dtype=np.int64)
+
+
+def _closest_lambda(num, den, target, power, scale):
+    """The step (0 included) whose moment ratio ``num / den^power`` is closest to ``target``."""
+    grid = np.concatenate([[0.0], np.linspace(-4.0, 4.0, 4001) * scale])
+    values = (
+        np.polynomial.polynomial.polyval(grid, num) / np.polynomial.polynomial.polyval(grid, den) ** power
+    )
+    return grid[np.argmin(np.abs(values - target))]
+
+
+def _solve_lambda(coeffs_num, coeffs_den, target, power):
+    """Smallest |lambda| with num(l)^2 = target^2 den(l)^power (sign of num = sign of target)."""
+    num = np.polynomial.Polynomial(coeffs_num)
+    den = np.polynomial.Polynomial(coeffs_den)
+    if power == 3:  # skewness: num / den^1.5 = t  ->  num^2 - t^2 den^3 = 0, sign(num) = sign(t)
+        poly = num**2 - target**2 * den**3
+    else:  # kurtosis: num / den^2 = t  ->  num - t den^2 = 0
+        poly = num - target * den**2
+    roots = poly.roots()
+    real = roots[np.abs(roots.imag) < 1e-6 * np.maximum(1.0, np.abs(roots.real))].real
+    if power == 3:
+        real = real[np.sign(num(real)) == np.sign(target)] if target != 0 else real
+    if real.size == 0:
+        return None
+    return real[np.argmin(np.abs(real))]
+
+
+def impose_skewness(x: np.ndarray, target: float) -> np.ndarray:
+    """Move ``x`` along the skewness gradient until its skewness is ``target`` (``modskew``).
+
+    ``y = x + l (d^2 - (m3/m2) d - m2)`` (``d`` = centred ``x``): the direction is orthogonal to
+    the mean and to ``d``, so mean and variance change only to second order and are restored.
+    The skewness of ``y`` is a ratio of polynomials in ``l`` whose coefficients are moments;
+    the root of smallest ``|l|`` is taken.
+    """
+    mean = x.mean()
+    d = (x - mean).ravel()
+    d2 = d * d
+    m2 = d2.mean()
+    if m2 <= 0:
+        return x
+    m3 = np.dot(d2, d) / d.size
+    g = d2 - (m3 / m2) * d - m2
+    g2 = g * g
+    num = [m3, 3 * np.dot(d2, g) / d.size, 3 * np.dot(d, g2) / d.size, np.dot(g2, g) / d.size]
+    den = [m2, 2 * np.dot(d, g) / d.size, g2.mean()]
+    lam = _solve_lambda(num, den, target, 3)
+    if lam is None:  # unreachable target: go to the closest reachable skewness instead
+        lam = _closest_lambda(num, den, target, 1.5, np.sqrt(m2 / max(den[2], 1e-300)))
+    y = d + lam * g
+    y *= np.sqrt(m2 / np.mean(y * y))
+    return (y + mean).reshape(x.shape)
+
+
+def impose_kurtosis(x: np.ndarray, target: float) -> np.ndarray:
+    """Move ``x`` along the kurtosis gradient until its kurtosis is ``target`` (``modkurt``).
+
+    ``y = x + l g`` with ``g`` the part of ``d^3`` orthogonal to ``1, d, d^2`` (normal equations
+    from the moments), so that mean, variance and skewness change only to second order; the
+    mean and variance are restored exactly.
+    """
+    mean = x.mean()
+    d = (x - mean).ravel()
+    n = d.size
+    d2 = d * d
+    d3 = d2 * d
+    m = [1.0, 0.0, d2.mean(), d3.mean(), np.dot(d2, d2) / n, np.dot(d3, d2) / n, np.dot(d3, d3) / n]
+    if m[2] <= 0:
+        return x
+    gram = np.array([[m[i + j] for j in range(3)] for i in range(3)])
+    rhs = np.array([m[3], m[4], m[5]])
+    try:
+        coef = np.linalg.solve(gram, rhs)
+    except np.linalg.LinAlgError:
+        coef = np.linalg.lstsq(gram, rhs, rcond=None)[0]
+    g = d3 - coef[0] - coef[1] * d - coef[2] * d2
+    g2 = g * g
+    num = [m[4], 4 * np.dot(d3, g) / n, 6 * np.dot(d2, g2) / n, 4 * np.dot(d, g2 * g) / n, np.dot(g2, g2) / n]
+    den = [m[2], 2 * np.dot(d, g) / n, g2.mean()]
+    lam = _solve_lambda(num, den, target, 4)
+    if lam is None:
+        lam = _closest_lambda(num, den, target, 2.0, np.sqrt(m[2] / max(den[2], 1e-300)))
+    y = d + lam * g
+    y -= y.mean()
+    y *= np.sqrt(m[2] / np.mean(y * y))
+    return (y + mean).reshape(x.shape)
+
+
+def _sqrtm(c: np.ndarray, inverse: bool = False) -> np.ndarray:
+    vals, vecs = np.linalg.eigh((c + c.T) / 2)
+    top = max(vals.max(), 0.0)
+    vals = np.maximum(vals, 1e-12 * top if top > 0 else 0.0)
+    if inverse:
+        vals = np.where(vals > 0, 1.0 / np.sqrt(np.where(vals > 0, vals, 1.0)), 0.0)
+    else:
+        vals = np.sqrt(vals)
+    return (vecs * vals) @ vecs.T
+
+
+def adjust_correlation(x: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """Linearly transform the columns of ``x`` (N, k) so that ``x^T x / N = target`` (``adjustCorr1s``)."""
+    current = x.T @ x / x.shape[0]
+    return x @ (_sqrtm(current, inverse=True) @ _sqrtm(target))
+
+
+def adjust_cross_correlation(
+    x: np.ndarray, target: np.ndarray, y: np.ndarray, target_xy: np.ndarray
+) -> np.ndarray:
+    """Modify ``x`` (N, k), given fixed ``y`` (N, m), so that ``x^T x / N = target`` and
+    ``x^T y / N = target_xy`` (``adjustCorr2s``).
+
+    The part of ``x`` explained by ``y`` is replaced by the target regression and the
+    residual is rescaled to the target residual covariance (clipped to be positive).
+    """
+    n, k = x.shape
+    rows = np.concatenate([x.T, y.T], axis=0)  # (k + m, N), contiguous rows for BLAS
+    gram = rows @ rows.T / n
+    bxx, bxy, byy = gram[:k, :k], gram[:k, k:], gram[k:, k:]
+    ibyy = np.linalg.pinv(byy)
+    regression = ibyy @ bxy.T  # (m, k)
+    current = bxx - bxy @ regression
+    desired = target - target_xy @ ibyy @ target_xy.T
+    m = _sqrtm(current, inverse=True) @ _sqrtm(desired)
+    # (x - y regression) m + y ibyy target_xy^T, with two products of N-column matrices
+    return (m.T @ rows[:k] + (ibyy @ target_xy.T - regression @ m).T @ rows[k:]).T
+
+
+def fit_window(target: np.ndarray, shape: tuple[int, int], lags: int) -> np.ndarray:
+    """Crop a target auto-correlation window to what a band of ``shape`` allows.
+
+    The window of a ``h x w`` band has half-width ``min(lags, min(h, w) // 2 - 1)``, as in
+    :func:`texsyn.models.portilla.central_autocorrelation`.
+
+    Examples
+    --------
+    >>> fit_window(np.zeros((1, 7, 7)), (4, 4), 3).shape
+    (1, 3, 3)
+    """
+    allowed = max(0, min(lags, min(shape) // 2 - 1))
+    have = (target.shape[-1] - 1) // 2
+    cut = have - min(allowed, have)
+    return target[..., cut : target.shape[-2] - cut, cut : target.shape[-1] - cut]
+
+
+def impose_lowpass_statistics(
+    images: np.ndarray, autocorr: np.ndarray, skew_kurt: np.ndarray, pixel_var: np.ndarray, lags: int
+) -> np.ndarray:
+    """Impose auto-correlation, skewness and kurtosis on every channel of a low-pass image.
+
+    The partially reconstructed low-pass images of paper section 4 (``(C, h, w)``). A channel
+    whose target variance is below ``1e-4`` of its pixel variance ``pixel_var`` only gets its
+    variance (its auto-correlation system would be ill-conditioned).
+    """
+    window = fit_window(autocorr, images.shape[-2:], lags)
+    centre = (window.shape[-1] - 1) // 2
+    target_var = window[:, centre, centre]
+    active = target_var / np.maximum(pixel_var, 1e-300) > 1e-4
+    out = np.array(images, dtype=np.float64)
+    if active.any():
+        out[active] = impose_autocorrelation(out[active], window[active])
+    for c in range(out.shape[0]):
+        if active[c]:
+            out[c] = impose_kurtosis(impose_skewness(out[c], skew_kurt[c, 0]), skew_kurt[c, 1])
+        else:
+            current = np.mean((out[c] - out[c].mean()) ** 2)
+            if current > 0:
+                out[c] *= np.sqrt(target_var[c] / current)
+    return out
+
+
+def impose_parent_regression(reals: np.ndarray, parents: np.ndarray, target_xp: np.ndarray) -> np.ndarray:
+    """Give every column of ``reals`` (N, k) its target correlation ``target_xp`` (k, m) with
+    ``parents`` (N, m), keeping its variance (paper section 4: the real parts against the
+    phase-doubled parents; computed in single precision like the synthesis pyramid)."""
+    n, k = reals.shape
+    rows = np.concatenate([reals.T, parents.T], axis=0).astype(np.float32)  # (k + m, N)
+    gram = (rows @ rows.T).astype(np.float64) / n
+    own = np.diag(gram)[:k]
+    cross = gram[k:, :k]  # (m, k): parents^T reals / n
+    ibyy = np.linalg.pinv(gram[k:, k:])
+    regression = ibyy @ cross
+    fit = ibyy @ target_xp.T
+    current = own - np.einsum("mk,mk->k", cross, regression)
+    desired = np.maximum(own - np.einsum("km,mk->k", target_xp, fit), 0.0)
+    scale = np.sqrt(desired / np.where(current > 0, current, 1.0))
+    mix = (fit - regression * scale).T.astype(np.float32)
+    return (rows[:k] * scale[:, None].astype(np.float32) + mix @ rows[k:]).T.astype(np.float64)
+
+
+def impose_magnitude_statistics(
+    band: np.ndarray, target: PSStatistics, level: int, parent_magnitudes: np.ndarray | None, lags: int
+) -> np.ndarray:
+    """Give the complex bands ``(C, K, h, w)`` of ``level`` their target magnitude statistics.
+
+    Paper section 4: the centred magnitudes get their covariance across orientations and
+    channels and with the parent scale's magnitudes (:func:`adjust_cross_correlation`; the
+    coarsest scale has no parent: :func:`adjust_correlation`), then their auto-correlation,
+    then their mean; the phases are kept.
+    """
+    c, k = band.shape[:2]
+    n = band.shape[-1] * band.shape[-2]
+    current = np.abs(band)
+    mags = current - current.mean(axis=(-2, -1), keepdims=True)
+    m = mags.reshape(c * k, n).T
+    if parent_magnitudes is None:
+        m = adjust_correlation(m, target.magnitude_cross[level])
+    else:
+        m = adjust_cross_correlation(
+            m, target.magnitude_cross[level], parent_magnitudes, target.magnitude_parent[level]
+        )
+    mags = m.T.reshape(mags.shape)
+    mags = impose_autocorrelation(mags, fit_window(target.magnitude_autocorr[level], mags.shape[-2:], lags))
+    magnitude = np.maximum(mags + target.magnitude_means[level][..., None, None], 0.0)
+    return band * (magnitude / np.where(current > 0, current, 1.0))
+
+
+def shrink_highpass(highpass: np.ndarray, target_variance: np.ndarray) -> np.ndarray:
+    """Scale each channel of the high-pass residual ``(C, H, W)`` down to its target variance.
+
+    Paper section 4: only too much high-frequency energy is removed; a residual below its
+    target is left as it is.
+
+    Examples
+    --------
+    >>> float(shrink_highpass(np.full((1, 2, 2), 2.0), np.array([1.0]))[0, 0, 0])
+    1.0
+    """
+    hp_var = np.mean(highpass**2, axis=(-2, -1))
+    shrink = np.where(
+        hp_var > target_variance, np.sqrt(target_variance / np.where(hp_var > 0, hp_var, 1.0)), 1.0
+    )
+    return highpass * shrink[:, None, None]
+
+
+def impose_pixel_statistics(x: np.ndarray, target: PSStatistics) -> np.ndarray:
+    """Impose the pixel statistics on ``(C, H, W)`` channels (paper section 4, last step).
+
+    Mean and (colour) covariance with :func:`adjust_correlation`, then the skewness and
+    kurtosis of every channel with a non-zero target variance, then the value range (clipping).
+    """
+    c = x.shape[0]
+    mean0 = target.pixel_moments[:, 0]
+    var0 = target.pixel_moments[:, 1]
+    flat = x.reshape(c, -1)
+    centred = (flat - flat.mean(axis=1, keepdims=True)).T
+    flat = adjust_correlation(centred, target.colour_covariance).T + mean0[:, None]
+    for ci in range(c):
+        if var0[ci] > 0:
+            flat[ci] = impose_skewness(flat[ci], target.pixel_moments[ci, 2])
+            flat[ci] = impose_kurtosis(flat[ci], target.pixel_moments[ci, 3])
+    flat = np.clip(flat, target.pixel_range[:, :1], target.pixel_range[:, 1:])
+    return flat.reshape(x.shape)

@@ -1,0 +1,400 @@
+"""The patch-valued wavelet transform of coordinate maps: lifting scheme and coefficients.
+
+G. Peyré, *Texture synthesis and modification with a patch-valued wavelet transform*, SSVM
+2007, section 4 (``docs/methods/patch_wavelet.md``). A feature-valued image is a *coordinate
+map* ``T`` of shape ``(n_h, n_w, 2)`` (sides powers of two): every sample holds the exemplar
+position ``(row, col)`` of its feature, the exemplar window centred there; the displayed image
+is ``E(T)``. At level ``j`` the samples spaced ``s = 2^(j-1)`` apart are split into even and
+odd ones along rows, then along columns; each odd sample is predicted by the association-field
+mean ``m^omega`` of its two even neighbours (section 3) and the detail is the difference, in a
+``p``-dimensional embedding of the exemplar's patches, between prediction and truth.
+
+Here is what does not depend on an exemplar: the lifting steps, the walks of Tables 1-2 over
+a patch space (:class:`PatchLifting`), the coefficients and the window width of each level;
+the patch space of one exemplar is :class:`texsyn.models.patch_wavelet.PatchWaveletTransform`.
+Levels keep the paper's numbering ``j = 1 ... J``, 1 the finest (detail keys ``(j, axis)``);
+0-based coarse-to-fine walks call :meth:`PatchLifting.inverse_step` with ``level = j - 1``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..ops.progress import Reporter
+
+__all__ = [
+    "PatchLifting", "PatchWaveletCoefficients", "descriptor_dimension", "interleave", "largest_width",
+    "level_width", "next_even", "planned_widths", "split", "width_chain",
+]  # fmt: skip
+
+
+# ---------------------------------------------------------------------- window widths
+def largest_width(exemplar_shape: tuple[int, ...]) -> int:
+    """Largest window width an exemplar allows: the largest power of two ``<= min(H, W) / 2``."""
+    h, w = int(exemplar_shape[0]), int(exemplar_shape[1])
+    return 2 ** int(math.floor(math.log2(max(min(h, w) // 2, 1))))
+
+
+def level_width(level: int, min_width: int, max_width: int) -> int:
+    """Window width of ``level`` (1 is the finest): ``clamp(2^level, min_width, max_width)``.
+
+    The paper's ``w_j`` is ``2^j`` pixels, twice the spacing of the samples split at level
+    ``j`` (section 4); it is clamped below so that fine levels compare windows that carry
+    geometry and above so that coarse levels fit in the exemplar
+    (``docs/methods/patch_wavelet.md``, "Deviations").
+    """
+    return int(min(max(2**level, min_width), max_width))
+
+
+def width_chain(min_width: int, max_width: int, feature_width: int) -> list[int]:
+    """Every width a transform can use: ``min_width, 2 min_width, ... <= max_width`` and ``feature_width``."""
+    out, width = [], max(int(min_width), 1)
+    while width <= max_width:
+        out.append(width)
+        width *= 2
+    return sorted(set(out) | {int(feature_width)})
+
+
+def planned_widths(
+    exemplar_shape: tuple[int, ...],
+    *,
+    min_width: int = 8,
+    max_width: int | None = None,
+    feature_width: int | None = None,
+) -> list[int]:
+    """The window widths :meth:`PatchLifting.widths` will use, from shapes alone.
+
+    For memory estimates made before any array exists (``docs/memory.md``).
+
+    Examples
+    --------
+    >>> planned_widths((40, 40))
+    [8, 16]
+    >>> planned_widths((128, 128), min_width=4)
+    [4, 8, 16, 32, 64]
+    """
+    largest = largest_width(exemplar_shape)
+    top = largest if max_width is None else int(min(max_width, largest))
+    low = int(min(min_width, top))
+    feature = int(min(feature_width or min_width, top))
+    return width_chain(low, top, feature)
+
+
+def descriptor_dimension(width: int, max_resolution: int, channels: int) -> int:
+    """Length of the descriptor of a window of ``width``: ``min(width, max_resolution)^2 C``.
+
+    Examples
+    --------
+    >>> descriptor_dimension(32, 16, 3)
+    768
+    """
+    b = max(1, int(width) // int(max_resolution))
+    return (int(width) // b) ** 2 * int(channels)
+
+
+# ---------------------------------------------------------------------- lifting steps
+def split(samples: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray]:
+    """(Split) Even and odd samples along ``axis`` (Table 1)."""
+    moved = np.moveaxis(samples, axis, 0)
+    return np.moveaxis(moved[0::2], 0, axis), np.moveaxis(moved[1::2], 0, axis)
+
+
+def interleave(even: np.ndarray, odd: np.ndarray, axis: int) -> np.ndarray:
+    """(Join) Even samples at even indices, odd ones between them along ``axis`` (Table 2)."""
+    e = np.moveaxis(even, axis, 0)
+    out = np.empty((2 * e.shape[0],) + e.shape[1:], dtype=even.dtype)
+    out[0::2] = e
+    out[1::2] = np.moveaxis(odd, axis, 0)
+    return np.moveaxis(out, 0, axis)
+
+
+def next_even(even: np.ndarray, axis: int, boundary: str) -> np.ndarray:
+    """The even neighbour ``k + 1`` of every even sample along ``axis``: the cyclic one
+    (``'periodic'``, section 4) or, at the end, the last sample itself (``'symmetric'``, the
+    whole-sample mirror with which the paper analyses non-periodic textures)."""
+    if boundary == "periodic":
+        return np.roll(even, -1, axis=axis)
+    moved = np.moveaxis(even, axis, 0)
+    shifted = np.concatenate([moved[1:], moved[-1:]], axis=0)
+    return np.moveaxis(shifted, 0, axis)
+
+
+# ---------------------------------------------------------------------- coefficients
+@dataclass
+class PatchWaveletCoefficients:
+    """Coefficients of the patch-valued wavelet transform (section 4, Fig. 7).
+
+    Attributes
+    ----------
+    coarse : ndarray of int64, shape (c_h, c_w, 2)
+        Coarse coordinate map at level ``top_level``: ``1 x 1`` after a full forward
+        transform of a square map, ``2^a x 2^b`` with ``min(a, b) = 0`` after that of a
+        rectangular one; ``2 x 2`` for a square synthesis.
+    top_level : int
+        Coarsest level ``j_top``; the full map has shape ``(c_h 2^j_top, c_w 2^j_top)``.
+    details : dict
+        ``details[(j, axis)]``, ``j = 1 ... top_level`` (1 is the finest), ``axis`` 0 (vertical
+        pairs) or 1 (horizontal pairs): arrays ``(rows, cols, p)`` of detail vectors; a missing
+        entry means zero details. Shapes, for a map of shape ``(n_h, n_w)``:
+        ``(n_h/2^j, n_w/2^(j-1), p)`` for axis 0 and ``(n_h/2^j, n_w/2^j, p)`` for axis 1.
+    grid_boundary : {'periodic', 'symmetric'}
+        Boundary rule of the sample grid that produced them (the inverse must use the same).
+    """
+
+    coarse: np.ndarray
+    top_level: int
+    details: dict = field(default_factory=dict)
+    grid_boundary: str = "periodic"
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(n_h, n_w)``: shape of the coordinate map these coefficients describe."""
+        scale = 2**self.top_level
+        return (self.coarse.shape[0] * scale, self.coarse.shape[1] * scale)
+
+    @property
+    def size(self) -> int:
+        """Longest side of the coordinate map (its side ``n`` when it is square)."""
+        return max(self.shape)
+
+    def detail_shape(self, level: int, axis: int) -> tuple[int, int]:
+        """``(rows, cols)`` of the details of ``(level, axis)``."""
+        rows = self.shape[0] // 2**level
+        cols = self.shape[1] // 2**level
+        return (rows, 2 * cols) if axis == 0 else (rows, cols)
+
+    def __getitem__(self, key: tuple[int, int]) -> np.ndarray | None:
+        return self.details.get(key)
+
+    def norms(self) -> dict:
+        """``||d||_2`` of every detail vector, per ``(level, axis)``."""
+        return {key: np.linalg.norm(d, axis=-1) for key, d in self.details.items()}
+
+    def max_norm(self) -> float:
+        """Largest detail magnitude over all levels and directions (the ``max d_j`` of Fig. 7)."""
+        return max((float(n.max()) for n in self.norms().values() if n.size), default=0.0)
+
+    def thresholded(self, ratio: float, *, per_level: bool = False) -> PatchWaveletCoefficients:
+        """Hard thresholding that removes the small details (section 5.2).
+
+        A detail is kept iff ``||d|| > ratio * max``; the maximum is global, or per level
+        (both directions) with ``per_level=True``. ``ratio = 1`` removes every detail (pure
+        synthesis from the coarse features), ``ratio = 0`` removes none. (The paper's
+        displayed formula keeps the small ones; its text and Fig. 7 remove them,
+        ``docs/methods/patch_wavelet.md``.)
+        """
+        if not 0.0 <= ratio <= 1.0:
+            raise ValueError(f"ratio must be in [0, 1], got {ratio!r}")
+        norms = self.norms()
+        global_max = self.max_norm()
+        out = {}
+        for (level, axis), d in self.details.items():
+            if per_level:
+                top = max(float(norms[(level, a)].max()) for a in (0, 1) if (level, a) in norms)
+            else:
+                top = global_max
+            keep = norms[(level, axis)] > ratio * top
+            out[(level, axis)] = np.where(keep[..., None], d, 0.0)
+        return PatchWaveletCoefficients(self.coarse.copy(), self.top_level, out, self.grid_boundary)
+
+    def magnitudes(self) -> np.ndarray:
+        """Detail magnitudes packed like an orthogonal wavelet transform (Fig. 7).
+
+        Level ``j`` with ``a = n_h / 2^j`` and ``b = n_w / 2^j`` puts the horizontal-pair
+        magnitudes (``a x b``) in ``[0:a, b:2b]`` and the vertical-pair magnitudes
+        (``a x 2b``) in ``[a:2a, 0:2b]``; the coarse corner stays 0. The result has the shape
+        ``(n_h, n_w)`` of the map (``n x n`` for a square one).
+        """
+        n_h, n_w = self.shape
+        out = np.zeros((n_h, n_w))
+        norms = self.norms()
+        for level in range(1, self.top_level + 1):
+            a, b = n_h // 2**level, n_w // 2**level
+            if (level, 1) in norms:
+                out[0:a, b : 2 * b] = norms[(level, 1)]
+            if (level, 0) in norms:
+                out[a : 2 * a, 0 : 2 * b] = norms[(level, 0)]
+        return out
+
+
+# ---------------------------------------------------------------------- the lifting scheme
+class PatchLifting:
+    """Forward and inverse patch-valued wavelet transform over a patch space (Tables 1-2).
+
+    A subclass supplies the patch space of one exemplar: :attr:`exemplar_shape`,
+    :meth:`image` (the display ``E(T)``), :meth:`mean_features` (the association-field mean
+    ``m^omega`` of section 3, projected on the exemplar's windows) and :meth:`embedding`
+    (the parameterisation ``gamma_W`` and a nearest-neighbour tree for its inverse);
+    :class:`texsyn.models.patch_wavelet.PatchWaveletTransform` is the one texsyn uses. What
+    a walk needs and was not built ahead is built for that call only, never kept.
+
+    Attributes
+    ----------
+    min_width, max_width : int
+        Bounds of the window width of a level (:func:`level_width`).
+    feature_width : int
+        Window ``m0`` of the feature estimation (eq. 4).
+    """
+
+    min_width: int
+    max_width: int
+    feature_width: int
+
+    @property
+    def exemplar_shape(self) -> tuple[int, int]:
+        """``(H, W)`` of the exemplar whose positions the coordinate maps hold."""
+        raise NotImplementedError
+
+    def image(self, coords: np.ndarray) -> np.ndarray:
+        """The displayed image ``E(T)`` of a coordinate map ``(..., 2)``: ``(..., C)``."""
+        raise NotImplementedError
+
+    def mean_features(
+        self, first: np.ndarray, second: np.ndarray, axis: int, half_distance: int, width: int
+    ) -> np.ndarray:
+        """Flat exemplar position of ``m^omega(first, second)`` for every pair ``(n, 2)``."""
+        raise NotImplementedError
+
+    def embedding(self, width: int) -> tuple[np.ndarray, Any]:
+        """``(Y, tree)``: ``gamma_W`` of every exemplar position and a tree for ``gamma_W^-1``."""
+        raise NotImplementedError
+
+    # ------------------------------------------------------------------ widths and positions
+    def width(self, level: int) -> int:
+        """Patch width of ``level`` (1 is the finest)."""
+        return level_width(level, self.min_width, self.max_width)
+
+    def widths(self) -> list[int]:
+        """Every width any level (or the feature estimation) can use."""
+        return width_chain(self.min_width, self.max_width, self.feature_width)
+
+    def flat_positions(self, coords: np.ndarray) -> np.ndarray:
+        """Flat (C-order) exemplar indices of the positions ``(..., 2)``."""
+        return coords[..., 0] * self.exemplar_shape[1] + coords[..., 1]
+
+    def positions(self, flat: np.ndarray) -> np.ndarray:
+        """Exemplar positions ``(..., 2)`` of flat indices (int64)."""
+        return np.stack(np.divmod(flat, self.exemplar_shape[1]), axis=-1).astype(np.int64)
+
+    def predict(self, even: np.ndarray, axis: int, level: int, boundary: str) -> np.ndarray:
+        """Association-field mean of every even sample and its next even neighbour along ``axis``."""
+        nxt = next_even(even, axis, boundary)
+        flat = self.mean_features(
+            even.reshape(-1, 2), nxt.reshape(-1, 2), axis, 2 ** (level - 1), self.width(level)
+        )
+        return self.positions(flat).reshape(even.shape)
+
+    # ------------------------------------------------------------------ the transform
+    def forward(
+        self,
+        coords: np.ndarray,
+        *,
+        grid_boundary: str = "periodic",
+        report: Reporter | None = None,
+    ) -> PatchWaveletCoefficients:
+        """Forward transform of an ``n x n`` coordinate map, ``n = 2^J`` (Table 1).
+
+        A rectangular map of shape ``(2^a, 2^b)`` is transformed over ``min(a, b)`` levels,
+        which leaves a coarse map of ``2^(a - min) x 2^(b - min)`` features: the cost is
+        proportional to the number of samples, never to the square of the longer side.
+
+        Parameters
+        ----------
+        coords : ndarray of int, shape (n, n, 2) or (n_h, n_w, 2)
+            Sides powers of two, at least 2.
+        grid_boundary : {'periodic', 'symmetric'}
+            Neighbour rule at the border of the sample grid (:func:`next_even`).
+        report : Reporter, optional
+            Receives ``(level, levels)`` after each level.
+        """
+        T = self._check_map(coords)
+        levels = int(round(math.log2(min(T.shape[:2]))))
+        details = {}
+        embeddings: dict[int, tuple[np.ndarray, Any]] = {}  # this call's, never kept
+        for level in range(1, levels + 1):
+            width = self.width(level)
+            if width not in embeddings:
+                embeddings[width] = self.embedding(width)
+            Y = embeddings[width][0]
+            for axis in (0, 1):
+                even, odd = split(T, axis)
+                predicted = self.predict(even, axis, level, grid_boundary)
+                details[(level, axis)] = Y[self.flat_positions(predicted)] - Y[self.flat_positions(odd)]
+                T = even
+            if report is not None:
+                report(level, levels)
+        return PatchWaveletCoefficients(T.copy(), levels, details, grid_boundary)
+
+    def inverse_step(
+        self, coefficients: PatchWaveletCoefficients
+    ) -> Callable[[int, np.ndarray | None], np.ndarray]:
+        """One level of the backward transform (Table 2), as a coarse-to-fine step.
+
+        Returns ``step(level, T)``: the coordinate map of 0-based ``level`` (transform level
+        ``j = level + 1``) from the map ``T`` of the level above it. Odd samples with an
+        exactly zero detail take the prediction itself, so zero details need no embedding;
+        others take ``gamma^-1(gamma(prediction) - d)``.
+        """
+        boundary = coefficients.grid_boundary
+        embeddings: dict[int, tuple[np.ndarray, Any]] = {}  # this walk's, never kept
+
+        def step(level: int, coarser: np.ndarray | None) -> np.ndarray:
+            j, T = level + 1, np.asarray(coefficients.coarse if coarser is None else coarser, dtype=np.int64)
+            width = self.width(j)
+            for axis in (1, 0):
+                predicted = self.predict(T, axis, j, boundary)
+                d = coefficients[(j, axis)]
+                odd = predicted
+                if d is not None:
+                    if d.shape[:2] != T.shape[:2]:
+                        raise ValueError(
+                            f"details of level {j}, axis {axis} have shape {d.shape[:2]}, expected {T.shape[:2]}"
+                        )
+                    moved = np.any(d != 0, axis=-1)
+                    if moved.any():
+                        if width not in embeddings:
+                            embeddings[width] = self.embedding(width)
+                        Y, tree = embeddings[width]
+                        target = Y[self.flat_positions(predicted[moved])] - d[moved]
+                        odd = predicted.copy()
+                        odd[moved] = self.positions(tree.query(target)[1])
+                T = interleave(T, odd, axis)
+            return T
+
+        return step
+
+    def inverse(
+        self,
+        coefficients: PatchWaveletCoefficients,
+        *,
+        report: Reporter | None = None,
+    ) -> np.ndarray:
+        """Backward transform (Table 2): the ``coefficients.shape + (2,)`` coordinate map.
+
+        ``report`` (optional) receives ``(levels_done, levels)`` after each level.
+        """
+        step = self.inverse_step(coefficients)
+        T = np.asarray(coefficients.coarse, dtype=np.int64)
+        top = coefficients.top_level
+        for done, level in enumerate(range(top - 1, -1, -1), start=1):
+            T = step(level, T)
+            if report is not None:
+                report(done, top)
+        return T
+
+    def _check_map(self, coords: np.ndarray) -> np.ndarray:
+        T = np.asarray(coords)
+        if T.ndim != 3 or T.shape[2] != 2:
+            raise ValueError(f"coordinate map must have shape (n_h, n_w, 2), got {T.shape}")
+        for n in T.shape[:2]:
+            if n < 2 or n & (n - 1):
+                raise ValueError(f"coordinate map sides must be powers of two >= 2, got {T.shape[:2]}")
+        h, w = self.exemplar_shape
+        if T.min() < 0 or T[..., 0].max() >= h or T[..., 1].max() >= w:
+            raise ValueError("coordinate map holds positions outside the exemplar")
+        return T.astype(np.int64)
