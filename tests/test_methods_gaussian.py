@@ -6,7 +6,7 @@ import pytest
 import texsyn
 from texsyn import metrics
 from texsyn.methods.gaussian import gaussian_resample, raster_positions
-from texsyn.ops.gaussian import local_gaussian
+from texsyn.models.gaussian import local_gaussian
 
 
 def test_sampled_patches_have_the_estimated_mean_and_covariance():
@@ -59,7 +59,7 @@ def overlap_values_kept(name, exemplar, **params):
 @pytest.mark.method("clg", "rclg")
 def test_clg_keeps_overlaps_and_rclg_moves_them_by_about_theta(monkeypatch):
     ex = texsyn.data.exemplar("gravel", size=40).astype(np.float64)
-    from texsyn.methods import gaussian as module
+    from texsyn.models import gaussian as module
 
     records = []
     original = module.local_gaussian
@@ -93,7 +93,7 @@ def test_clg_keeps_overlaps_and_rclg_moves_them_by_about_theta(monkeypatch):
 
 
 def ex_patch_at_seed(ex, seed, n=10):
-    """The exemplar patch at the seed anchor t0, the first draw of the rng (spec 05, 4.8)."""
+    """The exemplar patch at the seed anchor t0, the first draw of the rng (docs/methods/local_gaussian.md)."""
     t0 = int(np.random.default_rng(seed).integers((ex.shape[0] - n + 1) * (ex.shape[1] - n + 1)))
     i, j = np.unravel_index(t0, (ex.shape[0] - n + 1, ex.shape[1] - n + 1))
     return ex[i : i + n, j : j + n]

@@ -90,13 +90,14 @@ def mean_region_area_outside(source_map, inside):
 
 @pytest.mark.method("cwt")
 def test_level_3_reproduces_words_where_pixel_sampling_grows_fragments():
+    from texsyn.drivers.raster import grow_pixels
     from texsyn.ops.nonparametric import NonParametricSampler
 
     ex = text_exemplar()  # 96x96 of printed text
     cwt = texsyn.make_method("cwt").fit(ex).sample_with_map((128, 128), rng=0)
     # the paper's pixel-domain baseline with the same seed (the whole exemplar at the centre)
     pixel = NonParametricSampler(np.pad(ex, 2), 5)
-    _, source = pixel.grow((128, 128), max_error=np.inf, seed_block=(2, 2, 96, 96), rng=np.random.default_rng(0))
+    _, source = grow_pixels(pixel, (128, 128), max_error=np.inf, seed_block=(2, 2, 96, 96), rng=np.random.default_rng(0))
     seed = np.zeros((128, 128), dtype=bool)
     seed[16:112, 16:112] = True
     words = mean_region_area_outside(cwt.source_map, seed)

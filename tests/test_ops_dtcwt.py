@@ -1,10 +1,10 @@
-"""DT-CWT: perfect reconstruction, orientation, reference values, filter identities (spec 02, 9)."""
+"""DT-CWT: perfect reconstruction, orientation, reference values, filter identities (Kingsbury's DT-CWT; docs/methods/cwt.md)."""
 
 import numpy as np
 import pytest
 
-from texsyn.ops.dtcwt import DTCWT
-from texsyn.ops.dtcwt_filters import FILTERS
+from texsyn.transforms.dtcwt import DTCWT
+from texsyn.transforms.dtcwt_filters import FILTERS
 
 SETS = [("near_sym_a", "qshift_a"), ("near_sym_b", "qshift_b")]
 

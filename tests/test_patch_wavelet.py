@@ -8,7 +8,7 @@ import texsyn
 from texsyn.cli import main
 from texsyn.io import read_image
 from texsyn.ops import NearestPatchIndex, extend_index, knn_patches, wrap_seam_ratio
-from texsyn.ops.patch_wavelet import (
+from texsyn.models.patch_wavelet import (
     ExemplarWindows,
     PatchWaveletTransform,
     lle_embedding,
@@ -87,7 +87,7 @@ def test_window_descriptors_are_block_means_of_the_extended_window(boundary, wid
 @pytest.mark.parametrize("axis", [0, 1])
 @pytest.mark.parametrize("width, s", [(8, 4), (16, 2), (32, 32)])
 def test_mean_descriptor_glues_the_two_continuations(axis, width, s):
-    """mu(x) = E(ta + s e_a + x) for x_a < 0, E(tb - s e_a + x) otherwise (spec 01, 4.3)."""
+    """mu(x) = E(ta + s e_a + x) for x_a < 0, E(tb - s e_a + x) otherwise (Peyré 2007, section 4; docs/methods/patch_wavelet.md)."""
     rng = np.random.default_rng(2)
     image = rng.random((30, 26, 1))
     windows = ExemplarWindows(image, "symmetric", max_resolution=8)

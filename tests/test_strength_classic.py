@@ -20,7 +20,7 @@ import texsyn
 from texsyn.methods.wavelet_sampling import block_indices, propagate
 from texsyn.metrics import sharpness_ratio, spectrum_distance
 from texsyn.ops import as_channels, extract_patches
-from texsyn.ops.dtcwt import DTCWT
+from texsyn.transforms.dtcwt import DTCWT
 from texsyn.ops.sparse import batch_omp
 
 COPY_METHODS = ("quilting", "efros_leung", "wei_levoy", "cwt")

@@ -19,7 +19,7 @@ import pytest
 from strength_utils import autocorrelation_gap, band_log2_ratios, exemplar_window_shares, psnr_db
 
 import texsyn
-from texsyn.ops.patch_wavelet import PatchWaveletTransform
+from texsyn.models.patch_wavelet import PatchWaveletTransform
 
 BRICK = texsyn.data.exemplar("brick", size=40)
 SHAPE = (64, 64)

@@ -1,4 +1,4 @@
-"""Efros-Leung non-parametric pixel sampling (Efros and Leung 1999)."""
+"""Efros–Leung non-parametric pixel sampling (Efros and Leung 1999); ``docs/methods/efros_leung.md``."""
 
 from __future__ import annotations
 
@@ -7,10 +7,12 @@ from typing import Annotated
 import numpy as np
 
 from .._validation import Range
-from ..ops.nonparametric import NonParametricSampler
-from ._base import Progress, TextureSynthesizer
-from ._memory import shape_dims, nonparametric_bytes, output_bytes
+from ..drivers.raster import grow_pixels
 from ..errors import InputError
+from ..ops.nonparametric import NonParametricSampler
+from ..ops.progress import Reporter
+from ._base import TextureSynthesizer
+from ._memory import nonparametric_bytes, output_bytes, shape_dims
 
 __all__ = ["EfrosLeung"]
 
@@ -18,17 +20,25 @@ __all__ = ["EfrosLeung"]
 class EfrosLeung(TextureSynthesizer):
     """Efros-Leung synthesis: grow the texture pixel by pixel from a central seed.
 
-    Every pixel is drawn from the exemplar pixels whose neighbourhood best matches its
-    already synthesised neighbourhood (Gaussian-weighted SSD, exhaustive exact search).
-    The search is batched into matrix products without changing the sequential result
-    (see :mod:`texsyn.ops.nonparametric`).
+    The algorithm of the paper (section 2), as :meth:`fit` and :meth:`_sample` run it:
+
+    1. ``fit``: every exemplar window of side ``w`` (:class:`~texsyn.ops.nonparametric.NonParametricSampler`);
+    2. ``sample``: a random ``seed_size`` square of the exemplar at the centre of the output;
+       then, pass after pass over the unfilled pixels that touch the filled region, each
+       pixel takes the centre of an exemplar window whose Gaussian-weighted distance to its
+       known neighbourhood is within ``(1 + tolerance)`` of the best, if at most
+       ``max_error`` (:func:`texsyn.drivers.raster.grow_pixels`).
+
+    The search is exhaustive and exact, batched into matrix products without changing the
+    sequential result (``docs/methods/efros_leung.md``).
 
     Parameters
     ----------
     window_size : int
         Odd side of the square neighbourhood window.
-    epsilon : float
-        Candidates are the windows within ``(1 + epsilon)`` of the best distance.
+    tolerance : float
+        Candidates are the windows within ``(1 + tolerance)`` of the best distance (the
+        paper's ``epsilon``; ``epsilon=`` is accepted with a DeprecationWarning).
     max_error : float
         Largest accepted distance per unit weight; it grows by 10 % after a pass that
         fills nothing.
@@ -51,17 +61,18 @@ class EfrosLeung(TextureSynthesizer):
     summary = "Efros-Leung pixel-by-pixel non-parametric sampling"
     reference = "Efros, Leung, ICCV 1999"
     has_source_map = True
+    deprecated_params = {"epsilon": "tolerance"}
 
     def __init__(
         self,
         *,
         window_size: Annotated[int, Range(3, 101)] = 11,
-        epsilon: Annotated[float, Range(0.0, 10.0)] = 0.1,
+        tolerance: Annotated[float, Range(0.0, 10.0)] = 0.1,
         max_error: Annotated[float, Range(0.0, None, low_open=True)] = 0.3,
         seed_size: Annotated[int, Range(1, 64)] = 3,
     ):
         self.window_size = window_size
-        self.epsilon = epsilon
+        self.tolerance = tolerance
         self.max_error = max_error
         self.seed_size = seed_size
 
@@ -93,18 +104,13 @@ class EfrosLeung(TextureSynthesizer):
         return terms
 
     def _sample(self, shape, rng, callback):
-        report = None
-        if callback is not None:
-
-            def report(done: int, total: int) -> None:
-                callback(Progress("pixels", done, total))
-
-        values, source = self.sampler_.grow(
+        values, source = grow_pixels(
+            self.sampler_,
             shape,
-            epsilon=self.epsilon,
+            tolerance=self.tolerance,
             max_error=self.max_error,
             seed_size=self.seed_size,
             rng=rng,
-            callback=report,
+            reporter=Reporter(callback, "pixels"),
         )
         return values, source

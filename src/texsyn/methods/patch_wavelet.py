@@ -2,37 +2,51 @@
 
 A texture is a coordinate map into the exemplar, decomposed by a lifting-style multiscale
 transform whose prediction is the association-field mean of two neighbouring features
-(:mod:`texsyn.ops.patch_wavelet`). Synthesis (section 5.1) is the inverse transform of 2x2
-random coarse features with zero details (or Gaussian details with a per-level ``sigma``,
-Fig. 6); it tiles the plane. Modification (section 5.2) analyses an input texture with the
-exemplar's features, removes the details below ``ratio`` times the largest, and rebuilds.
+(:mod:`texsyn.transforms.patch_wavelet`, :mod:`texsyn.models.patch_wavelet`). Synthesis
+(section 5.1) is the inverse transform of 2x2 random coarse features with zero details (or
+Gaussian details with a per-level ``sigma``, Fig. 6), walked from coarse to fine by
+:func:`texsyn.drivers.coarse_to_fine.coarse_to_fine`; it tiles the plane. Modification
+(section 5.2) analyses an input texture with the exemplar's features, removes the details
+below ``ratio`` times the largest, and rebuilds.
+
+Why this module is long: besides the paper's two procedures (synthesis, section 5.1, and
+modification, section 5.2), it holds the memory model that fit, sample and modify are checked
+against before any work (``docs/memory.md``), about a third of the module. The estimates are
+computed from the same window widths, descriptor lengths and query chunks the transform uses,
+and stay next to the code whose allocations they mirror so that a change to one is seen with
+the other.
 
 References
 ----------
 G. Peyré, "Texture synthesis and modification with a patch-valued wavelet transform",
-SSVM 2007, sections 2-5. Implementation notes: spec 01 (resolutions A1-A16).
+SSVM 2007, sections 2-5; ``docs/methods/patch_wavelet.md``.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Annotated, Callable, Sequence
+from typing import Annotated, Any
 
 import numpy as np
 
 from .._validation import OneOf, Range, as_exemplar
+from ..drivers.coarse_to_fine import coarse_to_fine
+from ..errors import InputError
+from ..models.patch_wavelet import PatchWaveletTransform
 from ..ops import as_channels, luma, match_histogram
-from ..ops.patch_wavelet import (
+from ..ops.linalg import fixed_order
+from ..ops.progress import Reporter
+from ..transforms.patch_wavelet import (
     PatchWaveletCoefficients,
-    PatchWaveletTransform,
     descriptor_dimension,
+    largest_width,
+    level_width,
     planned_widths,
 )
 from ._base import Progress, TextureSynthesizer
-from ._memory import shape_dims, output_bytes
-from ..errors import InputError
-from ..ops.linalg import fixed_order
+from ._memory import output_bytes, shape_dims
 
 __all__ = ["Modification", "PatchWavelet"]
 
@@ -98,16 +112,17 @@ class PatchWavelet(TextureSynthesizer):
         symmetric), 'periodic' or 'symmetric'.
     candidates : int
         Candidates of the float32 patch search re-ranked exactly.
-    random_state : int
-        Seed of the LLE eigen-solver (fitting only).
+    fit_rng : int
+        Seed of the LLE eigen-solver (fitting only; ``sample`` takes its own ``rng``).
+        ``random_state`` is its deprecated name.
     """
 
     name = "patch_wavelet"
     summary = "Patch-valued wavelet transform: inverse transform of random coarse features (periodic)"
     reference = (
-        "G. Peyré, Texture Synthesis and Modification with a Patch-Valued Wavelet Transform, "
-        "SSVM 2007"
+        "G. Peyré, Texture Synthesis and Modification with a Patch-Valued Wavelet Transform, SSVM 2007"
     )
+    deprecated_params = {"random_state": "fit_rng"}
     has_source_map = True
     source_map_exact = True
 
@@ -123,7 +138,7 @@ class PatchWavelet(TextureSynthesizer):
         lle_points: Annotated[int, Range(64, 1 << 20)] = 2048,
         exemplar_boundary: Annotated[str, OneOf(("auto", "periodic", "symmetric"))] = "auto",
         candidates: Annotated[int, Range(1, 64)] = 4,
-        random_state: Annotated[int, Range(0, None)] = 0,
+        fit_rng: Annotated[int, Range(0, None)] = 0,
     ):
         self.min_width = min_width
         self.max_resolution = max_resolution
@@ -134,14 +149,14 @@ class PatchWavelet(TextureSynthesizer):
         self.lle_points = lle_points
         self.exemplar_boundary = exemplar_boundary
         self.candidates = candidates
-        self.random_state = random_state
+        self.fit_rng = fit_rng
 
     # ------------------------------------------------------------------ fitting
     def min_exemplar_size(self) -> tuple[int, str]:
         side = max(4, 2 * self.min_width, self.feature_width)
         return side, f"patches of min_width={self.min_width} need at least {side}x{side} pixels"
 
-    def _make_transform(self, exemplar: np.ndarray) -> PatchWaveletTransform:
+    def _make_transform(self, exemplar: np.ndarray, **built) -> PatchWaveletTransform:
         return PatchWaveletTransform(
             exemplar,
             min_width=self.min_width,
@@ -152,38 +167,235 @@ class PatchWavelet(TextureSynthesizer):
             lle_points=self.lle_points,
             exemplar_boundary=self.exemplar_boundary,
             candidates=self.candidates,
-            random_state=self.random_state,
+            rng=self.fit_rng,
+            **built,
         )
 
     def _fit(self, exemplar: np.ndarray) -> None:
-        # descriptors and search indexes of every width; the LLE embeddings are computed on
-        # first use (only random details and modification need them) and kept.
-        # (memory was checked by fit, from memory_terms, before this point)
-        self.transform_ = self._make_transform(exemplar).prepare()
+        # the nearest-patch indexes of every width, and the LLE embeddings of the levels that
+        # draw random details (none for a pure synthesis): everything sample uses, whatever the
+        # output size (memory was checked by fit, from memory_terms, before this point)
+        self.transform_ = self._make_transform(exemplar, embedding_widths=self._noisy_widths(exemplar.shape))
 
-    # ------------------------------------------------------------------ memory
-    def _width_dims(self, exemplar_shape) -> list[tuple[int, int]]:
-        """``(width, descriptor length)`` of every index the transform builds."""
+    def _level_width(self, exemplar_shape, level: int) -> int:
+        """Window width of transform level ``level`` (1 the finest) for an exemplar of that shape."""
+        top = largest_width(exemplar_shape)
+        return level_width(level, min(self.min_width, top), top)
+
+    def _level_widths(self, exemplar_shape, levels: int) -> set[int]:
+        return {self._level_width(exemplar_shape, j) for j in range(1, levels + 1)}
+
+    def _noisy_widths(self, exemplar_shape) -> list[int]:
+        """Widths of the levels with ``sigma_j > 0``, for any output size (finitely many)."""
+        sig = np.asarray(self.sigma, dtype=np.float64).ravel()
+        if sig.size == 1:  # every level; level log2(W_max) already reaches the widest window
+            levels = list(range(1, int(math.log2(largest_width(exemplar_shape))) + 1)) if sig[0] > 0 else []
+        else:
+            levels = [j for j, s in enumerate(sig, start=1) if s > 0]
+        return sorted({self._level_width(exemplar_shape, j) for j in levels})
+
+    def sigma_profile(self, levels: int) -> np.ndarray:
+        """``sigma_j`` for ``j = 1 ... levels`` (finest first)."""
+        sig = np.asarray(self.sigma, dtype=np.float64).ravel()
+        if sig.size == 1:
+            return np.full(levels, sig[0])
+        out = np.zeros(levels)
+        out[: min(levels, sig.size)] = sig[:levels]
+        return out
+
+    # ------------------------------------------------------------------ synthesis
+    def _random_coefficients(
+        self, exemplar_shape, top: int, rng: np.random.Generator
+    ) -> PatchWaveletCoefficients:
+        """2x2 random coarse features and ``N(0, sigma_j^2)`` details (section 5.1, Fig. 6)."""
+        eh, ew = exemplar_shape[:2]
+        coarse = np.stack([rng.integers(0, eh, (2, 2)), rng.integers(0, ew, (2, 2))], axis=-1)
+        sigmas = self.sigma_profile(top)
+        coefficients = PatchWaveletCoefficients(coarse, top, {}, "periodic")
+        for level in range(top, 0, -1):
+            for axis in (1, 0):
+                if sigmas[level - 1] > 0:
+                    size = coefficients.detail_shape(level, axis) + (int(self.embedding_dim),)
+                    coefficients.details[(level, axis)] = sigmas[level - 1] * rng.standard_normal(size)
+        return coefficients
+
+    def _sample(self, shape, rng, callback):
+        transform: PatchWaveletTransform = self.transform_
+        h, w = shape
+        top = max(2, math.ceil(math.log2(max(h, w)))) - 1  # output side N = 2^(top + 1) >= 4
+        coefficients = self._random_coefficients(transform.exemplar_shape, top, rng)
+        report = Reporter(callback, "levels", top)
+        if report.active:
+            report(0, image=transform.image(coefficients.coarse))
+        maps = coarse_to_fine(
+            transform.inverse_step(coefficients),
+            top,
+            start=coefficients.coarse,
+            reporter=report,
+            preview=transform.image,
+        )
+        coords = maps[0][:h, :w]
+        return transform.image(coords), coords
+
+    # ------------------------------------------------------------------ modification
+    @staticmethod
+    def modify_grid(shape: tuple[int, int]) -> tuple[int, int]:
+        """Sample grid ``(n_h, n_w)`` that :meth:`modify` analyses for an input of ``shape``.
+
+        Each side is rounded up to a power of two (at least 2) on its own, so the grid has
+        fewer than four times the input's pixels whatever its aspect ratio.
+        """
+        return tuple(2 ** max(1, math.ceil(math.log2(max(1, int(side))))) for side in shape[:2])
+
+    @fixed_order
+    def modify(
+        self,
+        texture: np.ndarray,
+        ratio: float | Sequence[float] = 0.5,
+        *,
+        equalize: bool = True,
+        grid_boundary: str = "symmetric",
+        per_level: bool = False,
+        callback: Callable[[Progress], None] | None = None,
+    ) -> Modification | list[Modification]:
+        """Modify ``texture`` toward the fitted exemplar (paper section 5.2).
+
+        The texture is expressed with the exemplar's features (eq. 4, after equalising the
+        exemplar's colours to the texture's, channel by channel), decomposed by the forward
+        transform, the details of magnitude at most ``ratio`` times the largest are set to
+        zero, and the inverse transform rebuilds it. ``ratio = 0`` rebuilds the texture from
+        exemplar pixels, ``ratio = 1`` is a pure synthesis from one coarse feature; values in
+        between interpolate (Figs. 7-8). Each side that is not a power of two is extended
+        symmetrically to the next one, on its own, and cropped back: an ``H x W`` input is
+        analysed on a ``2^a x 2^b`` grid (``2^a >= H``, ``2^b >= W``), so a long thin input
+        costs what its number of pixels says, not what a square of its longer side would
+        (the transform of a rectangular grid stops at ``min(a, b)`` levels and keeps a few
+        coarse features, :meth:`PatchLifting.forward
+        <texsyn.transforms.patch_wavelet.PatchLifting.forward>`). Memory is checked before
+        the work (``docs/memory.md``). The fitted model is not changed: the embeddings the
+        analysis needs are built for this call.
+
+        Parameters
+        ----------
+        texture : ndarray, shape (H, W) or (H, W, C)
+            Converted to the exemplar's channels (grey is replicated, colour becomes luma).
+        ratio : float or sequence of float
+            Threshold(s) as a fraction of the largest detail magnitude, in [0, 1]; a sequence
+            shares one analysis and returns one result per value.
+        equalize : bool
+            Match the exemplar's colour histograms to the texture's first (Fig. 2).
+        grid_boundary : {'symmetric', 'periodic'}
+            Neighbour rule at the border of the sample grid ('periodic' for textures that tile).
+        per_level : bool
+            Threshold each level against its own largest detail instead of the global one.
+        callback : callable, optional
+            Receives :class:`Progress` records (stages 'features', 'analysis', 'synthesis').
+
+        Returns
+        -------
+        Modification, or a list of them when ``ratio`` is a sequence.
+        """
+        exemplar = self._require_fitted()
+        ratios: list[Any] = [ratio] if np.ndim(ratio) == 0 else list(ratio)  # type: ignore[arg-type]
+        for r in ratios:
+            if (
+                isinstance(r, (bool, np.bool_))
+                or not isinstance(r, (int, float, np.integer, np.floating))
+                or not 0.0 <= float(r) <= 1.0
+            ):
+                raise InputError(f"ratio must be a number in [0, 1], got {r!r}")
+        if grid_boundary not in ("symmetric", "periodic"):
+            raise InputError(f"grid_boundary must be 'symmetric' or 'periodic', got {grid_boundary!r}")
+        size = np.shape(texture) if not isinstance(texture, (str, bytes)) else ()
+        if len(size) in (2, 3) and min(size[:2]) >= 1:  # before the texture is even converted
+            (h, w), (n_h, n_w) = size[:2], self.modify_grid(size[:2])
+            self._check_memory(
+                exemplar.shape,
+                task=f"modifying a {w}x{h} texture ({n_w}x{n_h} grid) with a {exemplar.shape[1]}x{exemplar.shape[0]} exemplar",
+                advice="use a smaller texture or exemplar",
+                terms=self._modify_terms(exemplar.shape, size, bool(equalize), len(ratios)),
+            )
+        tex = as_channels(np.asarray(as_exemplar(texture, name="texture"), dtype=np.float64))
+        ex = as_channels(exemplar)
+        if tex.shape[2] != ex.shape[2]:
+            tex = np.repeat(tex, ex.shape[2], axis=2) if tex.shape[2] == 1 else luma(tex)[..., None]
+        h, w = tex.shape[:2]
+        n_h, n_w = self.modify_grid((h, w))
+        padded = np.pad(tex, ((0, n_h - h), (0, n_w - w), (0, 0)), mode="symmetric")
+        used = sorted(self._level_widths(ex.shape, int(math.log2(min(n_h, n_w)))))
+        if equalize:
+            equalized = np.stack(
+                [match_histogram(ex[..., c], tex[..., c]) for c in range(ex.shape[2])], axis=-1
+            )
+            feature = min(self.feature_width, largest_width(ex.shape))
+            transform = self._make_transform(equalized, widths=used + [feature], embedding_widths=used)
+        else:  # the fitted transform, with this call's embeddings (self.transform_ is unchanged)
+            transform = self.transform_.prepare(used)
+
+        report = Reporter(callback, "features", 1)
+        report(0)
+        features = transform.estimate_features(padded)
+        report(1)
+        coefficients = transform.forward(
+            features, grid_boundary=grid_boundary, report=report.stage_of("analysis")
+        )
+        results = []
+        for r in ratios:
+            kept = coefficients.thresholded(float(r), per_level=per_level)
+            walk = report.stage_of("synthesis", kept.top_level)
+            coords = coarse_to_fine(
+                transform.inverse_step(kept), kept.top_level, start=kept.coarse, reporter=walk
+            )[0]
+            coords = coords[:h, :w]
+            results.append(
+                Modification(
+                    image=self._as_output(transform.image(coords)),
+                    source_map=coords.astype(np.int32),
+                    feature_map=features[:h, :w].astype(np.int32),
+                    magnitudes=kept.magnitudes(),
+                    ratio=float(r),
+                )
+            )
+        return results[0] if np.ndim(ratio) == 0 else results
+
+    # ------------------------------------------------------------------ memory (docs/memory.md)
+    def _width_dims(self, exemplar_shape) -> dict[int, int]:
+        """Descriptor length of every width the transform indexes."""
         _, _, c = shape_dims(exemplar_shape)
         widths = planned_widths(exemplar_shape, min_width=self.min_width, feature_width=self.feature_width)
-        return [(width, descriptor_dimension(width, self.max_resolution, c)) for width in widths]
+        return {width: descriptor_dimension(width, self.max_resolution, c) for width in widths}
+
+    def _embedding_bytes(self, k: float, dim: int) -> tuple[float, float]:
+        """``(kept, transient)`` bytes of the LLE embedding of one width (coordinates and tree)."""
+        n = min(k, self.lle_points * 1.0)
+        neighbours = self.lle_neighbors + 40
+        transient = 16.0 * k * dim + 8.0 * n * dim + (24.0 * n * n if n <= 512 else 64.0 * n * neighbours)
+        return k * (16.0 * self.embedding_dim + 32.0), transient + 8.0 * k * (neighbours + dim)
 
     def _model_terms(self, exemplar_shape) -> dict[str, float]:
-        """What a prepared transform holds: float32 indexes, extended exemplar, block means."""
+        """What a fitted transform holds: float32 indexes, extended exemplar, block means, embeddings."""
         h, w, c = shape_dims(exemplar_shape)
         k = float(h * w)
-        pairs = self._width_dims(exemplar_shape)
-        block_means = sum(1 for width, _ in pairs if width > self.max_resolution)
-        return {
-            "patch indexes": sum(4.0 * k * d + 4.0 * k for _, d in pairs),
+        dims = self._width_dims(exemplar_shape)
+        block_means = sum(1 for width in dims if width > self.max_resolution)
+        terms = {
+            "patch indexes": sum(4.0 * k * d + 4.0 * k for d in dims.values()),
             "extended exemplar and block means": 32.0 * k * c * (1 + block_means) + 8.0 * k * c,
         }
+        noisy = self._noisy_widths(exemplar_shape)
+        if noisy:
+            terms["embeddings"] = sum(self._embedding_bytes(k, dims[width])[0] for width in noisy)
+        return terms
 
     def _build_bytes(self, exemplar_shape) -> float:
-        """Transient of building the largest index: float64 descriptors and their centred copy."""
+        """Largest transient of the fit: float64 descriptors of an index, or an LLE embedding."""
         h, w, _ = shape_dims(exemplar_shape)
         k = float(h * w)
-        return max(20.0 * k * d + 16.0 * k * math.sqrt(d) + 16.0 * k for _, d in self._width_dims(exemplar_shape))
+        dims = self._width_dims(exemplar_shape)
+        out = max(20.0 * k * d + 16.0 * k * math.sqrt(d) + 16.0 * k for d in dims.values())
+        return max(
+            [out] + [self._embedding_bytes(k, dims[width])[1] for width in self._noisy_widths(exemplar_shape)]
+        )
 
     def _query_bytes(self, n_queries: float, dim: int, k: float, *, glued: bool) -> float:
         """Transient of one chunk of nearest-patch queries (descriptors, products, re-ranking)."""
@@ -196,46 +408,30 @@ class PatchWavelet(TextureSynthesizer):
         return max(make, 8.0 * chunk * dim + search) + 48.0 * chunk
 
     def _transform_query_bytes(self, grid: float, levels: int, exemplar_shape) -> float:
-        """Largest query transient of a forward or inverse transform of ``grid`` samples.
-
-        Level ``j`` predicts at most ``grid / 2^(2j - 1)`` samples with windows of
-        ``clamp(2^j, min_width, W_max)``.
-        """
+        """Largest query transient of a transform of ``grid`` samples: level ``j`` predicts at
+        most ``grid / 2^(2j - 1)`` samples with windows of ``clamp(2^j, min_width, W_max)``."""
         h, w, _ = shape_dims(exemplar_shape)
-        dims = dict(self._width_dims(exemplar_shape))
-        top = max(dims)
-        low = min(self.min_width, top)
+        dims = self._width_dims(exemplar_shape)
         return max(
-            self._query_bytes(max(1.0, grid / 2 ** (2 * j - 1)), dims[int(min(max(2**j, low), top))], float(h * w), glued=True)
+            self._query_bytes(
+                max(1.0, grid / 2 ** (2 * j - 1)),
+                dims[self._level_width(exemplar_shape, j)],
+                float(h * w),
+                glued=True,
+            )
             for j in range(1, levels + 1)
         )
 
-    def _embedding_bytes(self, k: float, dim: int) -> tuple[float, float]:
-        """``(kept, transient)`` bytes of the LLE embedding of one width (coordinates and tree)."""
-        p = self.embedding_dim
-        n = min(k, self.lle_points * 1.0)
-        neighbours = self.lle_neighbors + 40
-        kept = k * (16.0 * p + 32.0)
-        transient = 16.0 * k * dim + 8.0 * n * dim + (24.0 * n * n if n <= 512 else 64.0 * n * neighbours)
-        transient += 8.0 * k * (neighbours + dim)
-        return kept, transient
-
-    def _levels_widths(self, exemplar_shape, levels: int) -> set[int]:
-        pairs = self._width_dims(exemplar_shape)
-        top = max(w for w, _ in pairs)
-        low = min(self.min_width, top)
-        return {int(min(max(2**level, low), top)) for level in range(1, levels + 1)}
-
     def memory_terms(self, exemplar_shape, output_shape=None) -> dict[str, float]:
-        """Patch indexes of every width, their construction, searches and coordinate maps.
+        """Patch indexes of every width, embeddings, their construction, searches and maps.
 
         The fit holds one float32 index of ``H W`` descriptors per window width (the
-        descriptor has ``min(width, max_resolution)^2 C`` entries) and builds each from
-        float64 descriptors; a synthesis of ``h x w`` works on the ``N x N`` coordinate map of
-        the next power of two ``N >= max(h, w)`` and searches in chunks (``docs/memory.md``).
+        descriptor has ``min(width, max_resolution)^2 C`` entries), built from float64
+        descriptors, and the embeddings of the levels with random details; a synthesis of
+        ``h x w`` works on the ``N x N`` coordinate map of the next power of two
+        ``N >= max(h, w)`` and searches in chunks (``docs/memory.md``).
         """
-        h, w, c = shape_dims(exemplar_shape)
-        k = float(h * w)
+        _, _, c = shape_dims(exemplar_shape)
         terms = self._model_terms(exemplar_shape)
         if output_shape is None:
             terms["float64 descriptors while building the patch indexes"] = self._build_bytes(exemplar_shape)
@@ -244,17 +440,9 @@ class PatchWavelet(TextureSynthesizer):
         n = float(2 ** max(2, math.ceil(math.log2(max(oh, ow)))))
         grid = n * n
         levels = int(math.log2(n)) - 1
-        used = self._levels_widths(exemplar_shape, levels)
-        dims = dict(self._width_dims(exemplar_shape))
-        transient = self._transform_query_bytes(grid, levels, exemplar_shape)
-        sig = self.sigma_profile(levels)
-        noisy = {int(min(max(2**level, min(used)), max(used))) for level in range(1, levels + 1) if sig[level - 1] > 0}
-        if noisy:
-            kept = [self._embedding_bytes(k, dims[width]) for width in noisy]
-            terms["embeddings"] = sum(e[0] for e in kept)
-            transient = max(transient, max(e[1] for e in kept))
+        terms["searches (largest)"] = self._transform_query_bytes(grid, levels, exemplar_shape)
+        if np.any(self.sigma_profile(levels) > 0):
             terms["random details"] = grid * self.embedding_dim * 8.0 * 2
-        terms["searches and embeddings (largest)"] = transient
         terms["coordinate maps"] = 64.0 * grid
         terms["output image"] = 8.0 * c * float(oh) * float(ow) + output_bytes(c, output_shape)
         return terms
@@ -298,11 +486,11 @@ class PatchWavelet(TextureSynthesizer):
         if equalize:
             terms["patch indexes of the equalised exemplar"] = sum(model.values())
             transients.append(self._build_bytes(exemplar_shape))
-        dims = dict(self._width_dims(exemplar_shape))
+        dims = self._width_dims(exemplar_shape)
         feature = min(self.feature_width, max(dims))
         transients.append(self._query_bytes(grid, dims[feature], k, glued=False))
         levels = int(math.log2(min(n_h, n_w)))
-        used = self._levels_widths(exemplar_shape, levels)
+        used = self._level_widths(exemplar_shape, levels)
         transients.append(self._transform_query_bytes(grid, levels, exemplar_shape))
         kept = [self._embedding_bytes(k, dims[width]) for width in used]
         terms["embeddings"] = sum(e[0] for e in kept)
@@ -313,152 +501,3 @@ class PatchWavelet(TextureSynthesizer):
         per_result = grid * 8.0 + float(th) * float(tw) * (8.0 * c + 24.0) + output_bytes(c, texture_shape)
         terms["coordinate maps and results"] = 64.0 * grid + n_ratios * per_result
         return terms
-
-    @staticmethod
-    def modify_grid(shape: tuple[int, int]) -> tuple[int, int]:
-        """Sample grid ``(n_h, n_w)`` that :meth:`modify` analyses for an input of ``shape``.
-
-        Each side is rounded up to a power of two (at least 2) on its own, so the grid has
-        fewer than four times the input's pixels whatever its aspect ratio.
-        """
-        return tuple(2 ** max(1, math.ceil(math.log2(max(1, int(side))))) for side in shape[:2])
-
-    def sigma_profile(self, levels: int) -> np.ndarray:
-        """``sigma_j`` for ``j = 1 ... levels`` (finest first)."""
-        sig = np.asarray(self.sigma, dtype=np.float64).ravel()
-        if sig.size == 1:
-            return np.full(levels, sig[0])
-        out = np.zeros(levels)
-        out[: min(levels, sig.size)] = sig[:levels]
-        return out
-
-    # ------------------------------------------------------------------ synthesis
-    def _sample(self, shape, rng, callback):
-        transform: PatchWaveletTransform = self.transform_
-        h, w = shape
-        levels = max(2, math.ceil(math.log2(max(h, w))))  # output side N = 2^levels >= 4
-        top = levels - 1
-        eh, ew = transform.exemplar_shape
-        coarse = np.stack([rng.integers(0, eh, (2, 2)), rng.integers(0, ew, (2, 2))], axis=-1)
-        sigmas = self.sigma_profile(top)
-        coefficients = PatchWaveletCoefficients(coarse, top, {}, "periodic")
-        for level in range(top, 0, -1):
-            for axis in (1, 0):
-                if sigmas[level - 1] > 0:
-                    size = coefficients.detail_shape(level, axis) + (transform.embedding_dim,)
-                    coefficients.details[(level, axis)] = sigmas[level - 1] * rng.standard_normal(size)
-        if callback is not None:
-            callback(Progress("levels", 0, top, image=transform.image(coarse)))
-
-            def report(done, total, coords):
-                callback(Progress("levels", done, total, image=transform.image(coords)))
-        else:
-            report = None
-        coords = transform.inverse(coefficients, callback=report)
-        coords = coords[:h, :w]
-        return transform.image(coords), coords
-
-    # ------------------------------------------------------------------ modification
-    @fixed_order
-    def modify(
-        self,
-        texture: np.ndarray,
-        ratio: float | Sequence[float] = 0.5,
-        *,
-        equalize: bool = True,
-        grid_boundary: str = "symmetric",
-        per_level: bool = False,
-        callback: Callable[[Progress], None] | None = None,
-    ) -> Modification | list[Modification]:
-        """Modify ``texture`` toward the fitted exemplar (paper section 5.2, spec 01 5.4).
-
-        The texture is expressed with the exemplar's features (eq. 4, after equalising the
-        exemplar's colours to the texture's, channel by channel), decomposed by the forward
-        transform, the details of magnitude at most ``ratio`` times the largest are set to
-        zero, and the inverse transform rebuilds it. ``ratio = 0`` rebuilds the texture from
-        exemplar pixels, ``ratio = 1`` is a pure synthesis from one coarse feature; values in
-        between interpolate (Figs. 7-8). Each side that is not a power of two is extended
-        symmetrically to the next one, on its own, and cropped back: an ``H x W`` input is
-        analysed on a ``2^a x 2^b`` grid (``2^a >= H``, ``2^b >= W``), so a long thin input
-        costs what its number of pixels says, not what a square of its longer side would
-        (the transform of a rectangular grid stops at ``min(a, b)`` levels and keeps a few
-        coarse features, :meth:`PatchWaveletTransform.forward
-        <texsyn.ops.patch_wavelet.PatchWaveletTransform.forward>`). Memory is checked before
-        the work (``docs/memory.md``).
-
-        Parameters
-        ----------
-        texture : ndarray, shape (H, W) or (H, W, C)
-            Converted to the exemplar's channels (grey is replicated, colour becomes luma).
-        ratio : float or sequence of float
-            Threshold(s) as a fraction of the largest detail magnitude, in [0, 1]; a sequence
-            shares one analysis and returns one result per value.
-        equalize : bool
-            Match the exemplar's colour histograms to the texture's first (Fig. 2).
-        grid_boundary : {'symmetric', 'periodic'}
-            Neighbour rule at the border of the sample grid ('periodic' for textures that tile).
-        per_level : bool
-            Threshold each level against its own largest detail instead of the global one.
-        callback : callable, optional
-            Receives :class:`Progress` records (stages 'features', 'analysis', 'synthesis').
-
-        Returns
-        -------
-        Modification, or a list of them when ``ratio`` is a sequence.
-        """
-        exemplar = self._require_fitted()
-        ratios = [ratio] if np.ndim(ratio) == 0 else list(ratio)
-        for r in ratios:
-            if isinstance(r, (bool, np.bool_)) or not isinstance(r, (int, float, np.integer, np.floating)) or not 0.0 <= float(r) <= 1.0:
-                raise InputError(f"ratio must be a number in [0, 1], got {r!r}")
-        if grid_boundary not in ("symmetric", "periodic"):
-            raise InputError(f"grid_boundary must be 'symmetric' or 'periodic', got {grid_boundary!r}")
-        size = np.shape(texture) if not isinstance(texture, (str, bytes)) else ()
-        if len(size) in (2, 3) and min(size[:2]) >= 1:  # before the texture is even converted
-            (h, w), (n_h, n_w) = size[:2], self.modify_grid(size[:2])
-            self._check_memory(
-                exemplar.shape,
-                task=f"modifying a {w}x{h} texture ({n_w}x{n_h} grid) with a {exemplar.shape[1]}x{exemplar.shape[0]} exemplar",
-                advice="use a smaller texture or exemplar",
-                terms=self._modify_terms(exemplar.shape, size, bool(equalize), len(ratios)),
-            )
-        tex = as_channels(np.asarray(as_exemplar(texture, name="texture"), dtype=np.float64))
-        ex = as_channels(exemplar)
-        if tex.shape[2] != ex.shape[2]:
-            tex = np.repeat(tex, ex.shape[2], axis=2) if tex.shape[2] == 1 else luma(tex)[..., None]
-        h, w = tex.shape[:2]
-        n_h, n_w = self.modify_grid((h, w))
-        padded = np.pad(tex, ((0, n_h - h), (0, n_w - w), (0, 0)), mode="symmetric")
-        if equalize:
-            equalized = np.stack(
-                [match_histogram(ex[..., c], tex[..., c]) for c in range(ex.shape[2])], axis=-1
-            )
-            transform = self._make_transform(equalized)
-        else:
-            transform = self.transform_
-
-        def stage(name):
-            if callback is None:
-                return None
-            return lambda done, total, *_: callback(Progress(name, done, total))
-
-        if callback is not None:
-            callback(Progress("features", 0, 1))
-        features = transform.estimate_features(padded)
-        if callback is not None:
-            callback(Progress("features", 1, 1))
-        coefficients = transform.forward(features, grid_boundary=grid_boundary, callback=stage("analysis"))
-        results = []
-        for r in ratios:
-            kept = coefficients.thresholded(float(r), per_level=per_level)
-            coords = transform.inverse(kept, callback=stage("synthesis"))[:h, :w]
-            results.append(
-                Modification(
-                    image=self._as_output(transform.image(coords)),
-                    source_map=coords.astype(np.int32),
-                    feature_map=features[:h, :w].astype(np.int32),
-                    magnitudes=kept.magnitudes(),
-                    ratio=float(r),
-                )
-            )
-        return results[0] if np.ndim(ratio) == 0 else results

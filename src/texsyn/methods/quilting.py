@@ -1,4 +1,4 @@
-"""Efros-Freeman image quilting (Efros and Freeman 2001)."""
+"""Efros–Freeman image quilting (Efros and Freeman 2001); ``docs/methods/quilting.md``."""
 
 from __future__ import annotations
 
@@ -7,10 +7,15 @@ from typing import Annotated
 import numpy as np
 
 from .._validation import Range
-from ..ops import FFTPatchSearch, as_channels, boundary_cut_mask, overlap_error
-from ._base import Progress, TextureSynthesizer
-from ._memory import shape_dims, fft_search_bytes, output_bytes
+from ..drivers.raster import Block, block_canvas, block_positions, fill_blocks
 from ..errors import InputError
+from ..ops.canvas import crop_to_output
+from ..ops.patches import as_channels
+from ..ops.progress import Reporter
+from ..ops.seams import cut_mask
+from ..ops.search import FFTPatchSearch
+from ._base import TextureSynthesizer
+from ._memory import fft_search_bytes, output_bytes, shape_dims
 
 __all__ = ["Quilting"]
 
@@ -18,10 +23,16 @@ __all__ = ["Quilting"]
 class Quilting(TextureSynthesizer):
     """Image quilting: paste exemplar blocks in raster order, joined by minimum-error cuts.
 
-    Each block is chosen at random among the exemplar blocks whose squared error on the
-    overlap with what is already synthesised is within ``(1 + tolerance)`` of the best
-    (exact FFT search over every exemplar position); it is then pasted along the
-    minimum-error boundary cut of the vertical, horizontal or L-shaped overlap.
+    The algorithm of the paper (section 2.1), as :meth:`_sample` runs it through the raster
+    block loop :func:`texsyn.drivers.raster.fill_blocks`:
+
+    1. go through the output in raster order, in steps of ``patch_size - overlap``;
+    2. choose the block (:meth:`_choose`): the first at random; the others at random among
+       the exemplar blocks whose squared error on the overlap with what is already
+       synthesised is within ``(1 + tolerance)`` of the best (exact FFT search over every
+       exemplar position);
+    3. paste it (:meth:`_paste`) along the minimum-error boundary cut of the vertical,
+       horizontal or L-shaped overlap (:func:`texsyn.ops.seams.cut_mask`).
 
     Parameters
     ----------
@@ -89,54 +100,61 @@ class Quilting(TextureSynthesizer):
         if output_shape is None:
             terms["spectra construction"] = build
             return terms
-        step, o = self.patch_size - self._overlap(), self._overlap()
-        rows = max(1, -(-(output_shape[0] - o) // step)) * step + o
-        cols = max(1, -(-(output_shape[1] - o) // step)) * step + o
+        rows, cols = block_canvas(output_shape, self.patch_size, self.patch_size - self._overlap())
         terms["one block search"] = query
         terms["canvas and source map"] = float(rows) * cols * (8.0 * c + 8.0)
         terms["output image"] = output_bytes(c, output_shape)
         return terms
 
+    # ------------------------------------------------------------------ the paper's steps
+    def _choose(
+        self, block: Block, rng: np.random.Generator, energies: dict | None = None
+    ) -> tuple[int, int]:
+        """Exemplar corner of the next block (section 2.1, step 2).
+
+        ``energies`` is the sampling call's cache of the search's energy terms (one per
+        overlap shape); the fitted search itself is never changed.
+        """
+        anchor_rows, anchor_cols = self.search_.anchor_shape
+        if not block.known.any():
+            return int(rng.integers(anchor_rows)), int(rng.integers(anchor_cols))
+        d = self.search_.distances(block.values, block.known.astype(np.float64), energies=energies)
+        best = d.min()
+        cand = np.flatnonzero(d.ravel() <= best * (1.0 + self.tolerance) + 1e-9)
+        ti, tj = divmod(int(cand[rng.integers(cand.size)]), anchor_cols)
+        return ti, tj
+
+    def _paste(
+        self, block: Block, corner: tuple[int, int], exemplar: np.ndarray, source: np.ndarray
+    ) -> np.ndarray:
+        """The block joined along the boundary cut (section 2.1, step 3); records its source."""
+        b = self.patch_size
+        ti, tj = corner
+        old = block.values
+        new = exemplar[ti : ti + b, tj : tj + b]
+        if self.boundary_cut:
+            take = cut_mask(old, new, block.known)
+        else:
+            take = np.ones((b, b), dtype=bool)
+        src = source[block.row : block.row + b, block.col : block.col + b]
+        offsets = np.stack(np.meshgrid(np.arange(b), np.arange(b), indexing="ij"), axis=-1)
+        src[...] = np.where(take[..., None], offsets + (ti, tj), src)
+        return np.where(take[..., None], new, old)
+
     def _sample(self, shape, rng, callback):
         ex = as_channels(self.exemplar_)
         b, o = self.patch_size, self._overlap()
-        step = b - o
-        n_rows = max(1, -(-(shape[0] - o) // step))
-        n_cols = max(1, -(-(shape[1] - o) // step))
-        canvas = np.zeros((n_rows * step + o, n_cols * step + o, ex.shape[2]))
-        source = np.zeros(canvas.shape[:2] + (2,), dtype=np.int32)
-        offsets = np.stack(np.meshgrid(np.arange(b), np.arange(b), indexing="ij"), axis=-1)
-        anchor_rows, anchor_cols = self.search_.anchor_shape
-        masks = {}
-        total = n_rows * n_cols
-        for bi in range(n_rows):
-            for bj in range(n_cols):
-                y, x = bi * step, bj * step
-                left = o if bj > 0 else 0
-                top = o if bi > 0 else 0
-                old = canvas[y : y + b, x : x + b]
-                if left == 0 and top == 0:
-                    ti = int(rng.integers(anchor_rows))
-                    tj = int(rng.integers(anchor_cols))
-                else:
-                    key = (left, top)
-                    if key not in masks:
-                        m = np.zeros((b, b))
-                        m[:, :left] = 1.0
-                        m[:top, :] = 1.0
-                        masks[key] = m
-                    d = self.search_.distances(old, masks[key])
-                    best = d.min()
-                    cand = np.flatnonzero(d.ravel() <= best * (1.0 + self.tolerance) + 1e-9)
-                    ti, tj = divmod(int(cand[rng.integers(cand.size)]), anchor_cols)
-                new = ex[ti : ti + b, tj : tj + b]
-                if self.boundary_cut:
-                    take = boundary_cut_mask(overlap_error(old, new), left, top)
-                else:
-                    take = np.ones((b, b), dtype=bool)
-                canvas[y : y + b, x : x + b] = np.where(take[..., None], new, old)
-                src_block = source[y : y + b, x : x + b]
-                source[y : y + b, x : x + b] = np.where(take[..., None], offsets + (ti, tj), src_block)
-                if callback is not None:
-                    callback(Progress("blocks", bi * n_cols + bj + 1, total))
-        return canvas[: shape[0], : shape[1]], source[: shape[0], : shape[1]]
+        canvas_shape = block_canvas(shape, b, b - o)
+        canvas = np.zeros(canvas_shape + (ex.shape[2],))
+        source = np.zeros(canvas_shape + (2,), dtype=np.int32)
+        energies: dict = {}  # this call's cache of the search's energy terms
+        fill_blocks(
+            canvas,
+            block_positions(shape[0], b, b - o),
+            block_positions(shape[1], b, b - o),
+            b,
+            lambda block: self._choose(block, rng, energies),
+            lambda block, corner: self._paste(block, corner, ex, source),
+            reporter=Reporter(callback, "blocks"),
+        )
+        return crop_to_output(canvas, shape), crop_to_output(source, shape)

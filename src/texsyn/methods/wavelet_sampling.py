@@ -1,15 +1,31 @@
-"""Non-parametric sampling on the dual-tree complex wavelet transform (Gallagher, Kokaram).
+"""Non-parametric sampling on the dual-tree complex wavelet transform (Gallagher and Kokaram).
 
-Efros-Leung growth runs on the coarsest DT-CWT level, where one coefficient position
-summarises a ``2^L x 2^L`` pixel area, so that a small window sees large structures (whole
-words of a text). The six complex subbands are searched jointly; every synthesised
-position records its exemplar source, and all finer subbands and the low-pass image copy
-the corresponding blocks of the coefficient tree before the inverse transform.
+The algorithm of the paper's section 3.1, step by step (``docs/methods/cwt.md``):
+
+1. Analyse the exemplar with an ``L``-level DT-CWT, each of Y, U, V for colour
+   (:meth:`ComplexWaveletSampling._fit`, :class:`texsyn.transforms.dtcwt.DTCWT`).
+2. Walk the coefficient tree from the coarsest level to the finest
+   (:func:`texsyn.drivers.coarse_to_fine.coarse_to_fine`), one source map per level:
+
+   - at the coarsest level ``L - 1``, grow the output by Efros-Leung sampling on the six
+     complex subbands searched jointly, seeded with the exemplar at the centre
+     (:meth:`ComplexWaveletSampling._grow_coarsest`, with
+     :func:`texsyn.drivers.raster.grow_pixels`); one position there summarises a
+     ``2^L x 2^L`` pixel area, so a small window sees large structures (whole words of a
+     text);
+   - every finer level copies the ``2 x 2`` children of its parent's source
+     (:func:`block_indices`, the paper's Fig. 4), optionally re-searched locally
+     (:meth:`ComplexWaveletSampling._refine_level`, not in the paper).
+
+3. Gather every subband and the low-pass image of every channel along these maps
+   (:func:`propagate`) and invert the transform.
+
+Levels are 0-based, the finest first, as everywhere in texsyn; the paper's "level ``n``"
+is our level ``L - 1``.
 
 References
 ----------
-C. Gallagher, A. Kokaram, "Wavelet based texture synthesis" (non-parametric sampling in
-the DT-CWT domain), sections 2-3. Implementation notes: spec 02 (resolutions A1-A12).
+C. Gallagher, A. Kokaram, "Wavelet based texture synthesis", sections 2-3.
 """
 
 from __future__ import annotations
@@ -19,12 +35,17 @@ from typing import Annotated
 import numpy as np
 
 from .._validation import OneOf, Range
-from ..ops import as_channels, crop_to_multiple, rgb_to_yuv, yuv_to_rgb
-from ..ops.dtcwt import DTCWT, DTCWTPyramid
-from ..ops.nonparametric import NonParametricSampler
-from ._base import Progress, TextureSynthesizer
-from ._memory import shape_dims, nonparametric_bytes, output_bytes
+from ..drivers.coarse_to_fine import coarse_to_fine
+from ..drivers.raster import grow_pixels
 from ..errors import InputError
+from ..ops.color import rgb_to_yuv, yuv_to_rgb
+from ..ops.nonparametric import NonParametricSampler
+from ..ops.patches import as_channels
+from ..ops.progress import Reporter
+from ..transforms.dtcwt import DTCWT, DTCWTPyramid
+from ..transforms.pyramids import crop_to_multiple
+from ._base import TextureSynthesizer
+from ._memory import nonparametric_bytes, output_bytes, shape_dims
 
 __all__ = ["ComplexWaveletSampling", "propagate", "block_indices"]
 
@@ -33,8 +54,15 @@ def block_indices(grid: np.ndarray, block: int) -> np.ndarray:
     """Expand a per-cell index map to a per-sample map of ``block x block`` children.
 
     ``grid[i, j] = a`` (one coordinate) becomes ``out[b i + u, b j + v] = b a + u`` (rows)
-    for the coefficient tree of the paper's Fig. 4: the child ``(u, v)`` of cell ``(i, j)``
-    at a level ``log2(b)`` finer comes from the same child of the source cell.
+    for the coefficient tree of the paper's Fig. 4 (section 3.1, third step): the child
+    ``(u, v)`` of cell ``(i, j)`` at a level ``log2(b)`` finer comes from the same child of
+    the source cell.
+
+    Examples
+    --------
+    >>> block_indices(np.array([[[5, 7]]]), 2)[..., 0]
+    array([[10, 10],
+           [11, 11]])
     """
     rows = block * np.repeat(np.repeat(grid[..., 0], block, axis=0), block, axis=1)
     cols = block * np.repeat(np.repeat(grid[..., 1], block, axis=0), block, axis=1)
@@ -48,11 +76,18 @@ def propagate(pyramid: DTCWTPyramid, maps: list[np.ndarray], lowpass_map: np.nda
 
     Parameters
     ----------
+    pyramid : DTCWTPyramid
+        The exemplar's coefficients (one channel).
     maps : list of ndarray of int
-        ``maps[k-1]`` of shape ``(h_k, w_k, 2)``: exemplar position of every output
-        coefficient of level ``k``.
+        ``maps[level]`` of shape ``(h_level, w_level, 2)``, 0-based with the finest first:
+        the exemplar position of every output coefficient of that level.
     lowpass_map : ndarray of int
         Exemplar position of every output low-pass sample.
+
+    Returns
+    -------
+    DTCWTPyramid
+        The output's coefficients, ready for :meth:`DTCWT.inverse`.
     """
     highs = [hp[m[..., 0], m[..., 1]] for hp, m in zip(pyramid.highpasses, maps)]
     low = pyramid.lowpass[lowpass_map[..., 0], lowpass_map[..., 1]]
@@ -62,19 +97,22 @@ def propagate(pyramid: DTCWTPyramid, maps: list[np.ndarray], lowpass_map: np.nda
 class ComplexWaveletSampling(TextureSynthesizer):
     """DT-CWT domain non-parametric sampling (Gallagher and Kokaram).
 
-    Efros-Leung growth (Gaussian-weighted window, tolerance ``epsilon``) on the six complex
-    subbands of level ``levels``, seeded with the whole exemplar at the centre; the chosen
-    source positions drive the copy of every finer level and of the low-pass image through
-    the coefficient tree; colour is synthesised on Y and the same coordinates carry U and V.
+    Efros-Leung growth (Gaussian-weighted window, candidates within ``tolerance`` of the best)
+    on the six complex subbands of the coarsest level, seeded with the whole exemplar at the
+    centre; the chosen source positions drive the copy of every finer level and of the
+    low-pass image through the coefficient tree; colour is synthesised on Y and the same
+    coordinates carry U and V (``docs/methods/cwt.md``).
 
     Parameters
     ----------
     levels : int
-        DT-CWT level ``L`` of the search (each position covers ``2^L x 2^L`` pixels).
+        Number ``L`` of DT-CWT levels; the search runs on the coarsest, where each position
+        covers ``2^L x 2^L`` pixels.
     window : int
-        Odd neighbourhood width ``w1`` at level ``L``.
-    epsilon : float
-        Candidates are within ``(1 + epsilon)`` of the best distance.
+        Odd neighbourhood width ``w1`` at the coarsest level.
+    tolerance : float
+        Candidates are within ``(1 + tolerance)`` of the best distance (the paper's epsilon,
+        0.1).
     seed : str
         'exemplar' (the whole exemplar grid at the centre, the paper's Fig. 1) or 'random'
         (a random 3x3 block).
@@ -95,8 +133,9 @@ class ComplexWaveletSampling(TextureSynthesizer):
 
     Notes
     -----
-    Limitations (paper): mild blur, more visible on sharp textures, because the copied
-    blocks' filter supports overlap.
+    Limitations (paper, section 4): mild blur, more visible on sharp textures, because the
+    copied blocks' filter supports overlap. ``epsilon`` is the deprecated name of
+    ``tolerance``.
     """
 
     name = "cwt"
@@ -104,13 +143,14 @@ class ComplexWaveletSampling(TextureSynthesizer):
     reference = "Gallagher, Kokaram, Wavelet based texture synthesis"
     has_source_map = True
     source_map_exact = False
+    deprecated_params = {"epsilon": "tolerance"}
 
     def __init__(
         self,
         *,
         levels: Annotated[int, Range(1, 5)] = 3,
         window: Annotated[int, Range(3, 31)] = 5,
-        epsilon: Annotated[float, Range(0.0, 10.0)] = 0.1,
+        tolerance: Annotated[float, Range(0.0, 10.0)] = 0.1,
         seed: Annotated[str, OneOf(("exemplar", "random"))] = "exemplar",
         candidates: Annotated[str, OneOf(("all", "valid"))] = "all",
         filters: Annotated[str, OneOf(("a", "b"))] = "a",
@@ -119,7 +159,7 @@ class ComplexWaveletSampling(TextureSynthesizer):
     ):
         self.levels = levels
         self.window = window
-        self.epsilon = epsilon
+        self.tolerance = tolerance
         self.seed = seed
         self.candidates = candidates
         self.filters = filters
@@ -134,7 +174,10 @@ class ComplexWaveletSampling(TextureSynthesizer):
     def min_exemplar_size(self):
         cells = self.window if self.candidates == "valid" else 3
         side = 2**self.levels * cells
-        return side, f"levels={self.levels} needs at least {side}x{side} pixels ({cells} positions at level {self.levels})"
+        return (
+            side,
+            f"levels={self.levels} needs at least {side}x{side} pixels ({cells} positions at the coarsest level)",
+        )
 
     def _transform(self) -> DTCWT:
         return DTCWT(self.levels, biort=f"near_sym_{self.filters}", qshift=f"qshift_{self.filters}")
@@ -143,7 +186,7 @@ class ComplexWaveletSampling(TextureSynthesizer):
         """DT-CWT pyramids and the windows of the coarsest level; the output's pyramid and maps.
 
         The filters of length ``m`` are applied by gathering ``m`` shifted copies of an image,
-        and ``refine`` compares ``window^2`` complex neighbourhoods per level-1 position, which
+        and ``refine`` compares ``window^2`` complex neighbourhoods per level-0 position, which
         dominates large outputs (``docs/memory.md``).
         """
         h, w, c = shape_dims(exemplar_shape)
@@ -160,18 +203,20 @@ class ComplexWaveletSampling(TextureSynthesizer):
         if output_shape is None:
             terms["pyramid construction"] = max(8.0 * taps * k + 80.0 * k, transient)
             return terms
+        assert grid is not None
         full = float(grid[0] * q) * float(grid[1] * q)
         terms["growth at the coarsest level"] = transient
         terms["coefficient maps"] = 16.0 * full * (1.0 / 3 + 4.0 / 4**self.levels + 1.5)
         terms["one output pyramid and its inverse"] = pyramid / k * full + (8.0 * taps + 8.0) * full
         terms["output planes"] = 8.0 * c * full + output_bytes(c, output_shape)
         if self.refine:
-            # per level-1 position (full / 4): template, candidate windows and their
+            # per level-0 position (full / 4): template, candidate windows and their
             # difference, window^2 x 6 complex values each, and two real squares
             terms["local refinement"] = 84.0 * self.window**2 * full
         return terms
 
     def _fit(self, exemplar: np.ndarray) -> None:
+        """Step 1: the DT-CWT of every channel; the coarsest subbands of Y become the search bank."""
         ex = crop_to_multiple(as_channels(exemplar), 2**self.levels)
         channels = rgb_to_yuv(ex) if ex.shape[2] == 3 else ex
         transform = self._transform()
@@ -184,79 +229,131 @@ class ComplexWaveletSampling(TextureSynthesizer):
         self.cropped_shape_ = ex.shape[:2]
 
     def _sample(self, shape, rng, callback):
+        """Steps 2 and 3: source maps coarse to fine, then the gathered coefficients inverted."""
         q = 2**self.levels
         grid = (-(-shape[0] // q), -(-shape[1] // q))
+
+        def level_step(level: int, coarser: np.ndarray | None) -> np.ndarray:
+            if coarser is None:  # the coarsest level: Efros-Leung growth
+                return self._grow_coarsest(grid, rng, Reporter(callback, "positions"))
+            children = block_indices(coarser, 2)  # the coefficient tree (paper, Fig. 4)
+            return self._refine_level(level, children) if self.refine else children
+
+        maps = coarse_to_fine(level_step, self.levels)
+        cells = maps[-1]
+        lowpass_map = block_indices(cells, 2)
+        info = {"cells": cells, "level_maps": maps, "lowpass_map": lowpass_map}
+        Reporter(callback, "propagation", 1)(1, info=info)
+        transform = self._transform()
+        planes = [transform.inverse(propagate(p, maps, lowpass_map)) for p in self.pyramids_]
+        image = np.stack(planes, axis=-1)
+        if image.shape[2] == 3:
+            image = yuv_to_rgb(image)
+        # pixel source: the level-0 position of each pixel's coefficients, two pixels per position
+        pixel = block_indices(maps[0], 2)
+        pixel[..., 0] = np.minimum(pixel[..., 0], self.cropped_shape_[0] - 1)
+        pixel[..., 1] = np.minimum(pixel[..., 1], self.cropped_shape_[1] - 1)
+        return image[: shape[0], : shape[1]], pixel[: shape[0], : shape[1]]
+
+    def _grow_coarsest(
+        self, grid: tuple[int, int], rng: np.random.Generator, reporter: Reporter
+    ) -> np.ndarray:
+        """Efros-Leung growth of the coarsest level's source map (paper, sections 2 and 3.1).
+
+        The seed (the whole exemplar grid, or a random ``3 x 3`` block) is placed at the
+        centre; every other position takes a random one of the exemplar positions whose
+        Gaussian-weighted window distance over the six complex subbands is within
+        ``(1 + tolerance)`` of the best. No error threshold: the candidate set is always
+        accepted, coefficients have no fixed scale.
+
+        Returns
+        -------
+        ndarray of int, shape grid + (2,)
+            The exemplar position (at the coarsest level) of every output position.
+        """
         top = self.pyramids_[0].highpasses[-1]
         h, w = top.shape[:2]
         if self.seed == "exemplar":
             seed_block = (self.pad_, self.pad_, h, w)
         else:
             s = min(3, h, w)
-            seed_block = (self.pad_ + int(rng.integers(h - s + 1)), self.pad_ + int(rng.integers(w - s + 1)), s, s)
-        report = None
-        if callback is not None:
-
-            def report(done, total):
-                callback(Progress("positions", done, total))
-
-        _, source = self.sampler_.grow(
-            grid, epsilon=self.epsilon, max_error=np.inf, seed_block=seed_block, rng=rng, callback=report
+            seed_block = (
+                self.pad_ + int(rng.integers(h - s + 1)),
+                self.pad_ + int(rng.integers(w - s + 1)),
+                s,
+                s,
+            )
+        _, source = grow_pixels(
+            self.sampler_,
+            grid,
+            tolerance=self.tolerance,
+            max_error=np.inf,
+            seed_block=seed_block,
+            rng=rng,
+            reporter=reporter if reporter.active else None,
         )
-        cells = source - self.pad_
-        maps = [block_indices(cells, 2 ** (self.levels - k)) for k in range(1, self.levels + 1)]
-        if self.refine:
-            maps = self._refine(maps)
-        lowpass_map = block_indices(cells, 2)
-        if callback is not None:
-            info = {"cells": cells, "level_maps": maps, "lowpass_map": lowpass_map}
-            callback(Progress("propagation", 1, 1, info=info))
-        transform = self._transform()
-        planes = [transform.inverse(propagate(p, maps, lowpass_map)) for p in self.pyramids_]
-        image = np.stack(planes, axis=-1)
-        if image.shape[2] == 3:
-            image = yuv_to_rgb(image)
-        # pixel source: the level-1 position of each pixel's coefficients, two pixels per position
-        pixel = block_indices(maps[0], 2)
-        pixel[..., 0] = np.minimum(pixel[..., 0], self.cropped_shape_[0] - 1)
-        pixel[..., 1] = np.minimum(pixel[..., 1], self.cropped_shape_[1] - 1)
-        return image[: shape[0], : shape[1]], pixel[: shape[0], : shape[1]]
+        return source - self.pad_
 
     def _refine(self, maps: list[np.ndarray]) -> list[np.ndarray]:
-        """Local re-search of levels ``L-1 .. 1`` around the propagated sources (not in the paper).
+        """:meth:`_refine_level` on given source maps, levels ``L - 2`` down to 0.
 
-        At each finer level, every output position compares the window of coefficients
-        assembled so far around it with the exemplar windows around the propagated source
-        and its neighbours within ``refine_radius``, keeps the best, and hands the choice down
-        to its children.
+        Each refined level is handed down to every finer level (its children's blocks)
+        before that level is refined in turn; ``maps[level]`` is 0-based, the finest first.
+        :meth:`_sample` does the same level by level inside its coarse-to-fine walk; this
+        form refines maps built by hand (a test of the refinement alone).
         """
         refined = list(maps)
-        rad, half = self.refine_radius, self.window // 2
-        offsets = sorted(((di, dj) for di in range(-rad, rad + 1) for dj in range(-rad, rad + 1)), key=lambda o: abs(o[0]) + abs(o[1]))  # the propagated source first: it wins ties
-        ys, xs = np.mgrid[-half : half + 1, -half : half + 1]
-        for k in range(self.levels - 1, 0, -1):
-            ex_band = self.pyramids_[0].highpasses[k - 1]
-            eh, ew = ex_band.shape[:2]
-            current = refined[k - 1]
-            out_band = ex_band[current[..., 0], current[..., 1]]
-            oh, ow = out_band.shape[:2]
-            rows = np.clip(np.arange(oh)[:, None, None, None] + ys, 0, oh - 1)
-            cols = np.clip(np.arange(ow)[None, :, None, None] + xs, 0, ow - 1)
-            template = out_band[rows, cols]  # (oh, ow, w, w, 6)
-            best = np.full((oh, ow), np.inf)
-            choice = current.copy()
-            for di, dj in offsets:
-                cand_r = np.clip(current[..., 0] + di, 0, eh - 1)
-                cand_c = np.clip(current[..., 1] + dj, 0, ew - 1)
-                win = ex_band[
-                    np.clip(cand_r[..., None, None] + ys, 0, eh - 1),
-                    np.clip(cand_c[..., None, None] + xs, 0, ew - 1),
-                ]
-                dist = np.sum(np.abs(win - template) ** 2, axis=(2, 3, 4))
-                better = dist < best
-                best = np.where(better, dist, best)
-                choice[..., 0] = np.where(better, cand_r, choice[..., 0])
-                choice[..., 1] = np.where(better, cand_c, choice[..., 1])
-            refined[k - 1] = choice
-            for finer in range(k - 1, 0, -1):
-                refined[finer - 1] = block_indices(choice, 2 ** (k - finer))
+        for level in range(self.levels - 2, -1, -1):
+            refined[level] = self._refine_level(level, refined[level])
+            for finer in range(level - 1, -1, -1):
+                refined[finer] = block_indices(refined[level], 2 ** (level - finer))
         return refined
+
+    def _refine_level(self, level: int, current: np.ndarray) -> np.ndarray:
+        """Local re-search of one finer level around its propagated sources (not in the paper).
+
+        Every output position compares the window of coefficients that ``current`` assembles
+        around it with the exemplar windows around its propagated source and the neighbours
+        of that source within ``refine_radius``, and keeps the best (the propagated source
+        wins ties). The paper's section 4 names this blur as the direction of future work.
+
+        Parameters
+        ----------
+        level : int
+            0-based level, below the coarsest.
+        current : ndarray of int
+            The level's source map as propagated from the level above.
+
+        Returns
+        -------
+        ndarray of int
+            The refined source map, same shape.
+        """
+        rad, half = self.refine_radius, self.window // 2
+        offsets = sorted(
+            ((di, dj) for di in range(-rad, rad + 1) for dj in range(-rad, rad + 1)),
+            key=lambda o: abs(o[0]) + abs(o[1]),
+        )  # the propagated source first: it wins ties
+        ys, xs = np.mgrid[-half : half + 1, -half : half + 1]
+        ex_band = self.pyramids_[0].highpasses[level]
+        eh, ew = ex_band.shape[:2]
+        out_band = ex_band[current[..., 0], current[..., 1]]
+        oh, ow = out_band.shape[:2]
+        rows = np.clip(np.arange(oh)[:, None, None, None] + ys, 0, oh - 1)
+        cols = np.clip(np.arange(ow)[None, :, None, None] + xs, 0, ow - 1)
+        template = out_band[rows, cols]  # (oh, ow, w, w, 6)
+        best = np.full((oh, ow), np.inf)
+        choice = current.copy()
+        for di, dj in offsets:
+            cand_r = np.clip(current[..., 0] + di, 0, eh - 1)
+            cand_c = np.clip(current[..., 1] + dj, 0, ew - 1)
+            win = ex_band[
+                np.clip(cand_r[..., None, None] + ys, 0, eh - 1),
+                np.clip(cand_c[..., None, None] + xs, 0, ew - 1),
+            ]
+            dist = np.sum(np.abs(win - template) ** 2, axis=(2, 3, 4))
+            better = dist < best
+            best = np.where(better, dist, best)
+            choice[..., 0] = np.where(better, cand_r, choice[..., 0])
+            choice[..., 1] = np.where(better, cand_c, choice[..., 1])
+        return choice

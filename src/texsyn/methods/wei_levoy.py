@@ -1,12 +1,20 @@
 """Wei-Levoy multiresolution pixel synthesis with causal neighbourhoods (Wei and Levoy 2000).
 
-Both exemplar and output are Gaussian pyramids; the output starts as noise with the
-exemplar's histogram and is synthesised coarse to fine, each level in raster order: every
-pixel takes the value of the exemplar pixel whose neighbourhood (the causal L-shaped half of
-a ``window x window`` square at the same level, plus the full ``parent x parent`` square at
-the next coarser level) is nearest. Both images are treated toroidally, as in the paper.
-The search is exact, or approximate with the paper's tree-structured vector quantisation
-(``search='tsvq'``).
+The algorithm of the paper's sections 2-3, step by step (``docs/methods/wei_levoy.md``):
+
+1. Build the exemplar's Gaussian pyramid and, for every level and exemplar pixel, its
+   neighbourhood vector: the causal L-shaped half of a ``window x window`` square at that
+   level (the pixels before it in raster order) and the full ``parent_window`` square at the
+   next coarser level; optionally a tree-structured vector quantiser over them
+   (:meth:`WeiLevoy._fit`, :class:`TSVQ`).
+2. Start every level of the output pyramid as noise with the exemplar's histogram (random
+   exemplar pixels) and synthesise the levels coarse to fine
+   (:func:`texsyn.drivers.coarse_to_fine.coarse_to_fine`), each in raster order: every pixel
+   takes the value of the exemplar pixel whose neighbourhood is nearest to its own
+   (:meth:`WeiLevoy._synthesise_level`).
+
+Both images are treated toroidally, as in the paper. The search is exact, or approximate
+with the paper's tree-structured vector quantisation (``search='tsvq'``).
 
 Vectorisation: pixels are visited along wavefronts ``x + (r + 1) y = t`` (``r = window // 2``)
 and each wavefront is searched with one matrix product. A pixel's causal neighbourhood only
@@ -15,6 +23,8 @@ every pixel sees exactly what raster order would show it -- except the few pixel
 first ``r`` columns, whose toroidally wrapped neighbours at the end of the previous row are
 not synthesised yet (they hold the initial noise, as the wrapped rows of the first line do in
 the paper).
+
+Levels are 0-based, the finest (the full-size image) first.
 
 References
 ----------
@@ -29,13 +39,24 @@ from typing import Annotated
 import numpy as np
 
 from .._validation import OneOf, Range
-from ..ops import as_channels, gaussian_pyramid
-from ._base import Progress, TextureSynthesizer
-from ._memory import shape_dims, output_bytes, pixel_count
+from ..drivers.coarse_to_fine import coarse_to_fine
 from ..errors import InputError
 from ..ops.linalg import matmul
+from ..ops.patches import as_channels
+from ..ops.progress import Reporter
+from ..transforms.pyramids import gaussian_pyramid
+from ._base import TextureSynthesizer
+from ._memory import output_bytes, pixel_count, shape_dims
 
 __all__ = ["WeiLevoy", "causal_offsets", "TSVQ"]
+
+
+def pyramid_sizes(shape: tuple[int, int], levels: int) -> list[tuple[int, int]]:
+    """``(height, width)`` of each level, the finest first, halved (rounded up) at each level."""
+    sizes = [(int(shape[0]), int(shape[1]))]
+    for _ in range(levels - 1):
+        sizes.append(((sizes[-1][0] + 1) // 2, (sizes[-1][1] + 1) // 2))
+    return sizes
 
 
 def causal_offsets(window: int) -> np.ndarray:
@@ -61,7 +82,7 @@ class TSVQ:
     """Tree-structured vector quantiser: recursive 2-means splits of the neighbourhoods.
 
     A query descends to the child with the nearer centroid and is answered by an exact
-    search among the (few) vectors of the leaf it reaches (Wei and Levoy 2000, section 3.2).
+    search among the (few) vectors of the leaf it reaches (Wei and Levoy 2000, section 3).
 
     Parameters
     ----------
@@ -109,6 +130,7 @@ class TSVQ:
             dr = np.sum((self.centroids[right] - q) ** 2)
             node = left if dl <= dr else right
         idx = self.members[node]
+        assert idx is not None  # a leaf
         d = np.sum((self.vectors[idx] - q) ** 2, axis=1)
         return int(idx[np.argmin(d)])
 
@@ -129,19 +151,24 @@ class WeiLevoy(TextureSynthesizer):
         quantisation, approximate and faster on large exemplars).
     leaf_size : int
         Vectors per leaf of the TSVQ tree.
-    random_state : int
-        Seed of the TSVQ construction in fit.
+    fit_rng : int
+        Seed of the random choices of fit (the TSVQ construction); ``sample`` takes its own.
 
     References
     ----------
     L.-Y. Wei, M. Levoy, "Fast texture synthesis using tree-structured vector quantization",
     SIGGRAPH 2000.
+
+    Notes
+    -----
+    ``random_state`` is the deprecated name of ``fit_rng`` (``docs/methods/wei_levoy.md``).
     """
 
     name = "wei_levoy"
     summary = "Wei-Levoy multiresolution synthesis with causal neighbourhoods"
     reference = "Wei, Levoy, SIGGRAPH 2000"
     has_source_map = True
+    deprecated_params = {"random_state": "fit_rng"}
 
     def __init__(
         self,
@@ -151,20 +178,22 @@ class WeiLevoy(TextureSynthesizer):
         parent_window: Annotated[int, Range(1, 21)] = 5,
         search: Annotated[str, OneOf(("exact", "tsvq"))] = "exact",
         leaf_size: Annotated[int, Range(1, 4096)] = 32,
-        random_state: Annotated[int, Range(0, 2**32 - 1)] = 0,
+        fit_rng: Annotated[int, Range(0, 2**32 - 1)] = 0,
     ):
         self.levels = levels
         self.window = window
         self.parent_window = parent_window
         self.search = search
         self.leaf_size = leaf_size
-        self.random_state = random_state
+        self.fit_rng = fit_rng
 
     def _check_params(self) -> None:
         super()._check_params()
         for name in ("window", "parent_window"):
             if getattr(self, name) % 2 == 0:
-                raise InputError(f"parameter {name!r} of method 'wei_levoy' must be odd, got {getattr(self, name)}")
+                raise InputError(
+                    f"parameter {name!r} of method 'wei_levoy' must be odd, got {getattr(self, name)}"
+                )
 
     def min_exemplar_size(self):
         side = max(2 ** (self.levels - 1) * 2, self.window // 2 + 1)
@@ -179,9 +208,7 @@ class WeiLevoy(TextureSynthesizer):
         h, w, c = shape_dims(exemplar_shape)
         causal = (self.window**2 - 1) // 2
         parent = self.parent_window**2
-        sizes = [(h, w)]
-        for _ in range(self.levels - 1):
-            sizes.append(((sizes[-1][0] + 1) // 2, (sizes[-1][1] + 1) // 2))
+        sizes = pyramid_sizes((h, w), self.levels)
         kept, peak, dims = 8.0 * h * w * c * 7 / 3, 0.0, []
         for level, (sh, sw) in enumerate(sizes):  # the finest (largest) level is built first
             k = float(sh * sw)
@@ -203,9 +230,7 @@ class WeiLevoy(TextureSynthesizer):
         oh, ow = output_shape[:2]
         slope = self.window // 2 + 1
         front = 0.0
-        out_sizes = [(oh, ow)]
-        for _ in range(self.levels - 1):
-            out_sizes.append(((out_sizes[-1][0] + 1) // 2, (out_sizes[-1][1] + 1) // 2))
+        out_sizes = pyramid_sizes((oh, ow), self.levels)
         for level, (sh, sw) in enumerate(out_sizes):
             n = float(min(sh, -(-sw // slope)))
             k = float(sizes[level][0] * sizes[level][1])
@@ -218,11 +243,12 @@ class WeiLevoy(TextureSynthesizer):
         return terms
 
     def _fit(self, exemplar: np.ndarray) -> None:
+        """Step 1: the exemplar pyramid and every pixel's neighbourhood vector, level by level."""
         ex = as_channels(exemplar)
         self.pyramid_ = gaussian_pyramid(ex, self.levels, sigma=1.0)
         self.causal_ = causal_offsets(self.window)
         self.parent_ = square_offsets(self.parent_window)
-        rng = np.random.default_rng(self.random_state)
+        rng = np.random.default_rng(self.fit_rng)
         self.banks_, self.norms_, self.trees_ = [], [], []
         for level, image in enumerate(self.pyramid_):
             rows, cols = np.divmod(np.arange(image.shape[0] * image.shape[1]), image.shape[1])
@@ -235,43 +261,83 @@ class WeiLevoy(TextureSynthesizer):
             self.trees_.append(TSVQ(bank, self.leaf_size, rng) if self.search == "tsvq" else None)
 
     def _sample(self, shape, rng, callback):
-        sizes = [shape]
-        for _ in range(self.levels - 1):
-            sizes.append(((sizes[-1][0] + 1) // 2, (sizes[-1][1] + 1) // 2))
-        outputs: list[np.ndarray | None] = [None] * self.levels
-        source = None
+        """Step 2: the output pyramid, coarse to fine; the finest level and its sources."""
+        sizes = pyramid_sizes(shape, self.levels)
         total = sum(h * w for h, w in sizes)
-        done = 0
-        for level in reversed(range(self.levels)):
-            ex = self.pyramid_[level]
-            h, w = sizes[level]
-            flat_ex = ex.reshape(-1, ex.shape[2])
-            out = flat_ex[rng.integers(len(flat_ex), size=h * w)].reshape(h, w, ex.shape[2]).copy()
-            src = np.zeros((h, w), dtype=np.int64)
-            bank, norms, tree = self.banks_[level], self.norms_[level], self.trees_[level]
-            parent = outputs[level + 1] if level + 1 < self.levels else None
-            slope = self.window // 2 + 1
-            ys_all = np.arange(h)
-            for t in range(w + slope * (h - 1)):
-                xs = t - slope * ys_all
-                ok = (xs >= 0) & (xs < w)
-                ys, xs = ys_all[ok], xs[ok]
-                if ys.size == 0:
-                    continue
-                q = _gather(out, ys, xs, self.causal_)
-                if parent is not None:
-                    q = np.concatenate([q, _gather(parent, ys // 2, xs // 2, self.parent_)], axis=1)
-                if tree is not None:
-                    best = np.array([tree.query(v) for v in q])
-                else:
-                    best = np.argmin(norms[None, :] - 2.0 * matmul(q, bank.T), axis=1)
-                out[ys, xs] = flat_ex[best]
-                src[ys, xs] = best
-                done += len(ys)
-                if callback is not None and t % 64 == 0:
-                    callback(Progress(f"level {self.levels - level}/{self.levels}", done, total))
-            outputs[level] = out
-            source = src
+
+        def level_step(
+            level: int, coarser: tuple[np.ndarray, np.ndarray] | None
+        ) -> tuple[np.ndarray, np.ndarray]:
+            reporter = Reporter(callback, f"level {self.levels - level}/{self.levels}", total)
+            done = sum(h * w for h, w in sizes[level + 1 :])  # pixels of the coarser levels
+            parent = None if coarser is None else coarser[0]
+            return self._synthesise_level(level, sizes[level], parent, rng, reporter, done)
+
+        out, source = coarse_to_fine(level_step, self.levels)[0]
         ex_w = self.pyramid_[0].shape[1]
         source_map = np.stack(np.divmod(source, ex_w), axis=-1)
-        return outputs[0], source_map
+        return out, source_map
+
+    def _synthesise_level(
+        self,
+        level: int,
+        size: tuple[int, int],
+        parent: np.ndarray | None,
+        rng: np.random.Generator,
+        reporter: Reporter,
+        done: int,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """One output level in raster order (paper, section 2), given the coarser level.
+
+        The level starts as random exemplar pixels; wavefront by wavefront, every pixel takes
+        the exemplar pixel whose neighbourhood vector (causal half at this level, full square
+        in ``parent``) is nearest, exactly or through the level's TSVQ.
+
+        Parameters
+        ----------
+        level : int
+            0-based level, the finest first.
+        size : (int, int)
+            Height and width of the level.
+        parent : ndarray or None
+            The synthesised coarser level; ``None`` at the coarsest.
+        rng : numpy.random.Generator
+            Source of the initial noise.
+        reporter : Reporter
+            Receives the pixels done so far over all levels, every 64 wavefronts.
+        done : int
+            Pixels of the levels synthesised before this one.
+
+        Returns
+        -------
+        image : ndarray, shape size + (C,)
+        source : ndarray of int, shape size
+            Flat index of each pixel's exemplar pixel at this level.
+        """
+        ex = self.pyramid_[level]
+        h, w = size
+        flat_ex = ex.reshape(-1, ex.shape[2])
+        out = flat_ex[rng.integers(len(flat_ex), size=h * w)].reshape(h, w, ex.shape[2]).copy()
+        src = np.zeros((h, w), dtype=np.int64)
+        bank, norms, tree = self.banks_[level], self.norms_[level], self.trees_[level]
+        slope = self.window // 2 + 1
+        ys_all = np.arange(h)
+        for t in range(w + slope * (h - 1)):
+            xs = t - slope * ys_all
+            ok = (xs >= 0) & (xs < w)
+            ys, xs = ys_all[ok], xs[ok]
+            if ys.size == 0:
+                continue
+            q = _gather(out, ys, xs, self.causal_)
+            if parent is not None:
+                q = np.concatenate([q, _gather(parent, ys // 2, xs // 2, self.parent_)], axis=1)
+            if tree is not None:
+                best = np.array([tree.query(v) for v in q])
+            else:
+                best = np.argmin(norms[None, :] - 2.0 * matmul(q, bank.T), axis=1)
+            out[ys, xs] = flat_ex[best]
+            src[ys, xs] = best
+            done += len(ys)
+            if t % 64 == 0:
+                reporter(done)
+        return out, src

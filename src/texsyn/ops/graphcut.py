@@ -1,9 +1,11 @@
 """Exact graph-cut seams with Kwatra's normalised cost, and graph-cut patch re-assembly.
 
-Spec 00, section 7.2 and spec 04, section 5.4. The minimum cut between the pixels forced to
-the old content ``A`` (left column) and those forced to the new patch ``B`` (right column)
-of a planar strip is a shortest top-to-bottom path in the dual grid, found exactly by
-Dijkstra's algorithm (compiled with numba).
+The non-linear reconstruction of Tartavel, Gousseau and Peyré (2013), section 4.1, eq. (8),
+with the cost of Kwatra et al. (2003). The minimum cut between the pixels forced to the old
+content ``A`` (left column) and those forced to the new patch ``B`` (right column) of a
+planar strip is a shortest top-to-bottom path in the dual grid, found exactly by Dijkstra's
+algorithm (compiled with numba); the paper's "linear programming" is replaced by this exact
+shortest path (``docs/methods/sparse.md``, "Deviations").
 """
 
 from __future__ import annotations
@@ -20,7 +22,8 @@ def kwatra_costs(old: np.ndarray, new: np.ndarray) -> tuple[np.ndarray, np.ndarr
     """Normalised costs of Kwatra et al. (2003), Tartavel et al. eq. (8), for 4-adjacent pairs.
 
     ``M(x1, x2) = (|A(x1)-B(x1)|^2 + |A(x2)-B(x2)|^2) / (|A(x1)-A(x2)|^2 + |B(x1)-B(x2)|^2 + eps)``
-    with ``eps = 1e-3 * mean(denominator) + 1e-12`` (spec 00, 7.2).
+    with ``eps = 1e-3 * mean(denominator) + 1e-12``, which keeps flat regions from dividing by
+    zero (``docs/methods/sparse.md``).
 
     Parameters
     ----------
@@ -180,7 +183,7 @@ def cut_value(take_old: np.ndarray, cost_h: np.ndarray, cost_v: np.ndarray) -> f
 
 
 def graphcut_reassemble(patches: np.ndarray, step: int, shape: tuple[int, int]) -> np.ndarray:
-    """Stitch the patches of a periodic grid with exact graph-cut seams (spec 04, 5.4).
+    """Stitch the patches of a periodic grid with exact graph-cut seams (Tartavel et al. 2013, 4.1).
 
     Rows of patches are first assembled into strips with vertical cuts (plus the wrap-around
     cut of the last patch onto the first), then the strips are merged with horizontal cuts

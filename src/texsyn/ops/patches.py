@@ -1,4 +1,4 @@
-"""Patch extraction and overlap re-assembly (spec 00, section 1)."""
+"""Patch extraction and overlap re-assembly: the patch operator and its pseudo-inverse."""
 
 from __future__ import annotations
 
@@ -29,7 +29,7 @@ def extend_index(index: np.ndarray, size: int, mode: str = "symmetric") -> np.nd
     size : int
     mode : {'symmetric', 'periodic'}
         ``'symmetric'`` mirrors with the edge sample repeated (``-1 -> 0``, ``size -> size-1``;
-        NumPy's ``np.pad(mode='symmetric')``); ``'periodic'`` wraps (spec 00, section 0).
+        NumPy's ``np.pad(mode='symmetric')``); ``'periodic'`` wraps.
     """
     index = np.asarray(index)
     if mode == "periodic":
@@ -120,7 +120,7 @@ def overlap_add(
     image : ndarray, shape ``shape``
         The sum of the patches covering each pixel.
     coverage : ndarray, shape ``shape[:2]``
-        The number of patches covering each pixel (``rho`` in spec 00, section 1.2).
+        The number of patches covering each pixel (``rho``).
     """
     h, w = shape[:2]
     c = shape[2] if len(shape) == 3 else 1
@@ -149,7 +149,7 @@ def average_patches(
     *,
     mode: str = "valid",
 ) -> np.ndarray:
-    """Least-squares re-assembly ``Pi^+(P) = Pi^*(P) / rho`` (spec 00, section 1.2).
+    """Least-squares re-assembly ``Pi^+(P) = Pi^*(P) / rho``: the average of the overlapping patches.
 
     Pixels covered by no patch are set to zero.
     """

@@ -1,4 +1,4 @@
-"""Position colour maps for showing where synthesised pixels came from (spec 00, 2.5)."""
+"""Position colour maps for showing where synthesised pixels came from (Raad et al. 2016, Fig. 9)."""
 
 from __future__ import annotations
 

@@ -1,11 +1,28 @@
-"""Efros-Freeman minimum-error boundary cut between overlapping patches (spec 00, 7.1)."""
+"""Joining a new patch to what is already synthesised: minimum-error boundary cut, averaging.
+
+The boundary cut is Efros and Freeman's (2001, section 2.1): the pixels of the overlap are
+split along the path of least accumulated squared error, vertical, horizontal or L-shaped
+(``docs/methods/quilting.md``). :func:`paste_cut` and :func:`paste_average` are the two
+joining rules of the raster patch loop (:mod:`texsyn.drivers.raster`): quilting and LG join
+blocks along the cut, MSLG's coarsest scale averages the overlap (Raad et al. 2016, eq. 15).
+"""
 
 from __future__ import annotations
 
 import numpy as np
 from scipy import ndimage
 
-__all__ = ["cumulative_path_cost", "min_path", "l_shaped_cut", "boundary_cut_mask", "overlap_error"]
+__all__ = [
+    "boundary_cut_mask",
+    "cumulative_path_cost",
+    "cut_mask",
+    "l_shaped_cut",
+    "leading_known",
+    "min_path",
+    "overlap_error",
+    "paste_average",
+    "paste_cut",
+]
 
 
 def overlap_error(old: np.ndarray, new: np.ndarray) -> np.ndarray:
@@ -54,7 +71,7 @@ def l_shaped_cut(
     error: np.ndarray, left: int, top: int
 ) -> tuple[int, int, np.ndarray, np.ndarray]:
     """Minimum-error L-shaped cut: a vertical path in the left strip and a horizontal path
-    in the top strip that meet at a corner pixel (spec 00, 7.1).
+    in the top strip that meet at a corner pixel (Efros and Freeman 2001, section 2.1).
 
     Both cumulative costs are computed from the far ends (bottom row, rightmost column);
     the corner ``(ci, cj)`` minimises ``E_v + E_h - e``.
@@ -96,7 +113,7 @@ def boundary_cut_mask(error: np.ndarray, left: int, top: int) -> np.ndarray:
         True where the new patch is taken. Pixels strictly left of (above) the cut keep the
         old content; the cut itself and everything right of (below) it take the new patch.
         For an L-shaped overlap both cuts start from their far ends and meet at the corner
-        pixel minimising ``E_v + E_h - e`` (spec 00, 7.1).
+        pixel minimising ``E_v + E_h - e`` (``docs/methods/quilting.md``).
 
     References
     ----------
@@ -126,3 +143,61 @@ def boundary_cut_mask(error: np.ndarray, left: int, top: int) -> np.ndarray:
     # outside the overlap the new patch is always taken
     take_new[top:, left:] = True
     return take_new
+
+
+def leading_known(known: np.ndarray) -> tuple[int, int]:
+    """Widths of the fully known leading columns and rows of a block's known mask.
+
+    In raster order the known part of a block is an L: ``left`` columns on the left and
+    ``top`` rows at the top (0 when there are none).
+
+    Examples
+    --------
+    >>> mask = np.zeros((4, 4), dtype=bool)
+    >>> mask[:, :1] = True
+    >>> mask[:2, :] = True
+    >>> leading_known(mask)
+    (1, 2)
+    """
+    cols = known.all(axis=0)
+    rows = known.all(axis=1)
+    left = int(np.argmin(cols)) if not cols.all() else known.shape[1]
+    top = int(np.argmin(rows)) if not rows.all() else known.shape[0]
+    return left, top
+
+
+def cut_mask(old: np.ndarray, new: np.ndarray, known: np.ndarray) -> np.ndarray:
+    """Which pixels of ``new`` are taken when it joins ``old`` along the boundary cut.
+
+    The cut runs through the L-shaped known part of the block (:func:`leading_known`);
+    every unknown pixel takes the new patch.
+
+    Parameters
+    ----------
+    old, new : ndarray, shape (h, w) or (h, w, C)
+        The block's current content and the new patch.
+    known : ndarray of bool, shape (h, w)
+        The pixels already synthesised.
+
+    Returns
+    -------
+    ndarray of bool, shape (h, w)
+    """
+    left, top = leading_known(known)
+    return boundary_cut_mask(overlap_error(old, new), left, top) | ~known
+
+
+def paste_cut(old: np.ndarray, new: np.ndarray, known: np.ndarray) -> np.ndarray:
+    """The block after ``new`` joins ``old`` along the minimum-error boundary cut.
+
+    Efros and Freeman (2001, section 2.1); ``old`` and ``new`` of shape ``(h, w, C)``.
+    """
+    return np.where(cut_mask(old, new, known)[..., None], new, old)
+
+
+def paste_average(old: np.ndarray, new: np.ndarray, known: np.ndarray) -> np.ndarray:
+    """The block after ``new`` joins ``old`` by averaging the two on the known pixels.
+
+    Raad, Desolneux and Morel (2016, eq. 15); ``old`` and ``new`` of shape ``(h, w, C)``.
+    """
+    return np.where(known[..., None], 0.5 * (old + new), new)

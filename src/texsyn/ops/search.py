@@ -1,24 +1,28 @@
 """Exact nearest-patch search: FFT correlation for single masked queries, BLAS for batches.
 
-Spec 00, section 2. The weighted squared distance between a query window ``q`` with weights
-``w`` and the exemplar window anchored at ``t`` (top-left) is
+The weighted squared distance between a query window ``q`` with weights ``w`` and the
+exemplar window anchored at ``t`` (top-left) is
 
     d(t) = sum_x w(x) ||E(t + x) - q(x)||^2
          = (E^2 * w)(t) - 2 sum_c (E_c * (w q_c))(t) + sum_x w(x) ||q(x)||^2
 
 where ``*`` denotes correlation. All three terms are exact in float64 and the result is
 clamped at zero (the terms nearly cancel for good matches).
+
+Queries never change these objects (``docs/architecture.md``, "Fitted state"); what one
+synthesis reuses between its queries (the energy term of a repeated mask) is in a cache that
+the caller passes in.
 """
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numba
 import numpy as np
 
-from .patches import as_channels
 from .linalg import matmul
+from .patches import as_channels
 
 __all__ = [
     "knn_select",
@@ -33,8 +37,8 @@ __all__ = [
 def knn_select(distances: np.ndarray, k: int) -> np.ndarray:
     """Flat indices of the ``k`` smallest distances, ordered by (distance, index).
 
-    Tie-safe selection of spec 00, section 2.4: equal distances are ordered by their flat
-    index, and ``k`` is clamped to the number of candidates.
+    Tie-safe: equal distances are ordered by their flat index, so the selection does not
+    depend on how the partition orders them; ``k`` is clamped to the number of candidates.
     """
     d = np.asarray(distances).ravel()
     k = int(min(max(k, 1), d.size))
@@ -47,9 +51,10 @@ class FFTPatchSearch:
     """Exact (optionally weighted) SSD of one query window against every exemplar position.
 
     Everything that depends only on the exemplar (channel spectra, spectrum of the summed
-    squares) is computed once here; the mask-dependent energy term is cached per distinct
-    weight window, so repeated queries with the same overlap shape cost ``C`` forward and one
-    inverse real FFT.
+    squares) is computed once here, and queries never change the object. The mask-dependent
+    energy term can be kept in a cache that the caller owns (``energies``, one dict per
+    synthesis), so that repeated queries with the same overlap shape cost ``C`` forward and
+    one inverse real FFT.
 
     Parameters
     ----------
@@ -78,7 +83,6 @@ class FFTPatchSearch:
         self._sq_spectrum = np.fft.rfft2(np.sum(ex * ex, axis=2))
         self._sq_spectra = np.fft.rfft2(ex * ex, axes=(0, 1)) if ex.shape[2] > 1 else None
         self.channels = ex.shape[2]
-        self._energy_cache: dict[bytes, np.ndarray] = {}
 
     @property
     def anchor_shape(self) -> tuple[int, int]:
@@ -92,9 +96,10 @@ class FFTPatchSearch:
         a, b = self.anchor_shape
         return out[:a, :b]
 
-    def _energy(self, weights: np.ndarray) -> np.ndarray:
-        key = weights.tobytes()
-        hit = self._energy_cache.get(key)
+    def _energy(self, weights: np.ndarray, energies: dict | None) -> np.ndarray:
+        """The weight-dependent term ``(E^2 * w)(t)``, read from or stored in ``energies``."""
+        key = (weights.shape, weights.tobytes())
+        hit = None if energies is None else energies.get(key)
         if hit is None:
             if weights.ndim == 2:
                 kern = np.fft.rfft2(weights, s=self.shape)
@@ -102,12 +107,15 @@ class FFTPatchSearch:
             else:
                 kern = np.fft.rfft2(weights, s=self.shape, axes=(0, 1))
                 hit = self._correlate(np.sum(self._sq_spectra * np.conj(kern), axis=2))
-            if len(self._energy_cache) > 64:
-                self._energy_cache.clear()
-            self._energy_cache[key] = hit
+            if energies is not None:
+                if len(energies) > 64:
+                    energies.clear()
+                energies[key] = hit
         return hit
 
-    def distances(self, query: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
+    def distances(
+        self, query: np.ndarray, weights: np.ndarray | None = None, *, energies: dict | None = None
+    ) -> np.ndarray:
         """Weighted SSD map between ``query`` and every exemplar window.
 
         Parameters
@@ -118,11 +126,23 @@ class FFTPatchSearch:
             Non-negative pixel weights (a 0/1 mask, a Gaussian, ...), shared by the channels
             or one per channel (e.g. two terms of different weight stacked as channels,
             Raad et al. 2016 eq. 14); all ones by default.
+        energies : dict, optional
+            The caller's cache of this search's energy terms, keyed by the weights: one dict
+            (empty at first) per synthesis, for this search only. Without it every query
+            computes the term; the result is the same.
 
         Returns
         -------
         ndarray, shape :attr:`anchor_shape`
             ``d[t]`` for top-left anchors ``t``, clamped at zero.
+
+        Examples
+        --------
+        >>> search = FFTPatchSearch(np.arange(16.0).reshape(4, 4), (2, 2))
+        >>> cache = {}
+        >>> d = search.distances(np.array([[5.0, 6.0], [9.0, 10.0]]), energies=cache)
+        >>> d.shape, float(d[1, 1]), len(cache)
+        ((3, 3), 0.0, 1)
         """
         q = as_channels(np.asarray(query, dtype=np.float64))
         if q.shape[:2] != self.window:
@@ -136,13 +156,13 @@ class FFTPatchSearch:
         cross = np.fft.rfft2(wq, s=self.shape, axes=(0, 1))
         cross_term = self._correlate(np.sum(self._spectra * np.conj(cross), axis=2))
         const = float(np.sum(wq * q))
-        d = self._energy(w) - 2.0 * cross_term + const
+        d = self._energy(w, energies) - 2.0 * cross_term + const
         return np.maximum(d, 0.0, out=d)
 
     def knn(
         self, query: np.ndarray, weights: np.ndarray | None = None, k: int = 1
     ) -> tuple[np.ndarray, np.ndarray]:
-        """The ``k`` best anchors as ``(k, 2)`` ``(row, col)`` and their distances."""
+        """The ``k`` best anchors as ``(k, 2)`` ``(row, col)`` and their distances (tie-safe)."""
         d = self.distances(query, weights)
         idx = knn_select(d, k)
         rows, cols = np.unravel_index(idx, d.shape)
@@ -153,8 +173,8 @@ class WeightedPatchBank:
     """Exact weighted SSD between many queries, each with its own weights, and a patch bank.
 
     ``d[q, k] = sum_x weights[q, x] (bank[k, x] - queries[q, x])^2`` is computed as one
-    matrix product of ``[w, w q]`` with the stacked bank ``[bank^2, -2 bank]`` (spec 00, 2.2),
-    which is built once here.
+    matrix product of ``[w, w q]`` with the stacked bank ``[bank^2, -2 bank]``, which is built
+    once here (queries never change it).
 
     Parameters
     ----------
@@ -264,7 +284,16 @@ def nearest_both_ways(
     b_dist = np.full(bank.shape[0], np.inf)
     for start in range(0, queries.shape[0], block):
         q = queries[start : start + block]
-        _fold_minima(matmul(q, bank.T), query_norm[start : start + block], bank_norm, start, q_idx, q_dist, b_idx, b_dist)
+        _fold_minima(
+            matmul(q, bank.T),
+            query_norm[start : start + block],
+            bank_norm,
+            start,
+            q_idx,
+            q_dist,
+            b_idx,
+            b_dist,
+        )
     return q_idx, q_dist, b_idx, b_dist
 
 
@@ -291,12 +320,13 @@ def _best_columns(gram, half_norm, k, out):
 class NearestPatchIndex:
     """Nearest bank row of many query rows: a float32 BLAS screen, then an exact re-rank.
 
-    Spec 00, sections 2.2-2.3. The bank is centred on its mean (which keeps the float32
-    products accurate), the ``candidates`` best rows of every query are found from the
-    products ``Q X^T`` in float32 blocks by a compiled selection loop, and these candidates
-    are re-ranked by their exact float64 squared distance (ties: lowest row). The result is
-    the exact nearest row unless several rows are within float32 rounding of the best
-    (relative 1e-6), where any of them may be returned, deterministically.
+    The bank is centred on its mean (which keeps the float32 products accurate), the
+    ``candidates`` best rows of every query are found from the products ``Q X^T`` in float32
+    blocks by a compiled selection loop, and these candidates are re-ranked by their exact
+    float64 squared distance (ties: lowest row). The result is the exact nearest row unless
+    several rows are within float32 rounding of the best (relative 1e-6), where any of them
+    may be returned, deterministically. Everything is built here; queries never change the
+    index.
 
     Parameters
     ----------

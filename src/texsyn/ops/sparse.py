@@ -1,6 +1,9 @@
-"""Sparse coding: batch orthogonal matching pursuit, K-SVD, constrained matching pursuit.
+"""Sparse coding and the image step of constrained sparse synthesis (Tartavel et al. 2013).
 
-Spec 04, sections 4 and 5.2. Matrices follow Tartavel et al. (2013): patches are columns,
+Batch orthogonal matching pursuit and K-SVD (dictionary learning, eq. 1), the constrained
+matching pursuit (section 4.2, Algorithm 2), the gradient steps of the image update and the
+energy they decrease (section 4.1, eqs. 6-7), and the bicubic up-sampling between scales
+(section 4.3); ``docs/methods/sparse.md``. Matrices follow the paper: patches are columns,
 ``P`` is ``(L, K)``, the dictionary ``D`` is ``(L, N)`` with unit-norm atoms, the codes
 ``W`` are ``(N, K)``.
 """
@@ -8,12 +11,24 @@ Spec 04, sections 4 and 5.2. Matrices follow Tartavel et al. (2013): patches are
 from __future__ import annotations
 
 import heapq
+from collections.abc import Callable
 
 import numpy as np
+from scipy import ndimage
 from scipy.sparse import csr_matrix
-from .linalg import matmul
 
-__all__ = ["batch_omp", "ksvd", "constrained_matching_pursuit"]
+from .linalg import matmul
+from .patches import as_channels, extract_patches
+
+__all__ = [
+    "batch_omp",
+    "box_power",
+    "constrained_matching_pursuit",
+    "image_energy",
+    "image_update",
+    "ksvd",
+    "upsample_bicubic",
+]
 
 
 def batch_omp(
@@ -79,7 +94,10 @@ def batch_omp(
         codes[idx] = 0.0
         codes[idx[:, None], sup] = coef
         # D^T r = D^T x - G w with w sparse
-        sparse = csr_matrix((coef.ravel(), (np.repeat(np.arange(idx.size), sup.shape[1]), sup.ravel())), shape=(idx.size, n_atoms))
+        sparse = csr_matrix(
+            (coef.ravel(), (np.repeat(np.arange(idx.size), sup.shape[1]), sup.ravel())),
+            shape=(idx.size, n_atoms),
+        )
         corr[idx] = xtd[idx] - sparse @ g
     return np.ascontiguousarray(codes.T)
 
@@ -140,13 +158,13 @@ def ksvd(
             users = np.flatnonzero(w[n])
             if users.size == 0:
                 worst = int(np.argmax(np.einsum("ij,ij->j", residual, residual)))
-                vec = x[:, worst]
-                norm = np.linalg.norm(vec)
-                d[:, n] = vec / norm if norm > 1e-12 else d[:, n]
+                patch = x[:, worst]
+                norm = float(np.linalg.norm(patch))
+                d[:, n] = patch / norm if norm > 1e-12 else d[:, n]
                 continue
             err = residual[:, users] + np.outer(d[:, n], w[n, users])
             atom = err @ w[n, users]
-            norm = np.linalg.norm(atom)
+            norm = float(np.linalg.norm(atom))
             if norm < 1e-12:
                 continue
             atom /= norm
@@ -239,3 +257,106 @@ def constrained_matching_pursuit(
             heapq.heappush(heap, (-abs(corr[best[k], k]), k))
         steps += 1
     return w
+
+
+# ---------------------------------------------------------------------------- image step
+#: a histogram projection ``T_hist(u, rng)``: :class:`texsyn.ops.HistogramMatcher`
+Projector = Callable[[np.ndarray, "np.random.Generator | None"], np.ndarray]
+
+
+def upsample_bicubic(image: np.ndarray) -> np.ndarray:
+    """Periodic cubic-spline up-sampling by 2 between two scales (Tartavel et al. 2013, 4.3).
+
+    Fine pixel ``j`` sits at coarse coordinate ``j / 2``, so ``up[::2, ::2] == image``: the
+    grid of the coarse scale is the even pixels of the fine one.
+
+    Examples
+    --------
+    >>> coarse = np.arange(16.0).reshape(4, 4)
+    >>> up = upsample_bicubic(coarse)
+    >>> up.shape, bool(np.allclose(up[::2, ::2, 0], coarse))
+    ((8, 8, 1), True)
+    """
+    img = as_channels(np.asarray(image, dtype=np.float64))
+    h, w, channels = img.shape
+    ii, jj = np.meshgrid(np.arange(2 * h) / 2.0, np.arange(2 * w) / 2.0, indexing="ij")
+    out = np.empty((2 * h, 2 * w, channels))
+    for c in range(channels):
+        out[..., c] = ndimage.map_coordinates(img[..., c], [ii, jj], order=3, mode="grid-wrap")
+    return out
+
+
+def box_power(shape: tuple[int, int], tau: int) -> np.ndarray:
+    """``|h_hat|^2`` of the normalised ``tau x tau`` box ``h`` on a periodic canvas (eq. 3).
+
+    Examples
+    --------
+    >>> float(box_power((8, 8), 4)[0, 0])  # the box sums to 1
+    1.0
+    """
+    box = np.zeros(shape)
+    box[:tau, :tau] = 1.0 / tau**2
+    return np.abs(np.fft.rfft2(box)) ** 2
+
+
+def _lowpass_apply(e: np.ndarray, power: np.ndarray) -> np.ndarray:
+    """``h_bar * h * e`` per channel (periodic)."""
+    spec = np.fft.rfft2(e, axes=(0, 1)) * power[..., None]
+    return np.fft.irfft2(spec, s=e.shape[:2], axes=(0, 1))
+
+
+def image_update(
+    u: np.ndarray,
+    recon: np.ndarray,
+    projector: Projector,
+    *,
+    alpha: float,
+    beta: float,
+    box_power: np.ndarray,
+    reference: np.ndarray,
+    n_steps: int,
+    rng: np.random.Generator | None,
+) -> np.ndarray:
+    """Gradient steps on the energy (6) for fixed codes (Tartavel et al. 2013, eq. 7).
+
+    ``g = 2 (u - R) + 2 alpha (u - T_hist(u)) + 2 beta h_bar * h * (u - u_ref)`` with step
+    ``eta = 1 / (2 (1 + alpha + beta))``: half the inverse of the gradient's Lipschitz
+    constant ``2 (1 + alpha + beta)`` (the paper's bound in 4.1 is four times larger;
+    ``docs/methods/sparse.md``, "Deviations"). ``R`` is the reconstruction of the coded
+    patches (linear average or graph cuts).
+    """
+    eta = 1.0 / (2.0 * (1.0 + alpha + beta))
+    for _ in range(n_steps):
+        grad = 2.0 * (u - recon) + 2.0 * alpha * (u - projector(u, rng))
+        if beta > 0:
+            grad += 2.0 * beta * _lowpass_apply(u - reference, box_power)
+        u = u - eta * grad
+    return u
+
+
+def image_energy(
+    u: np.ndarray,
+    coded: np.ndarray,
+    tau: int,
+    step: int,
+    projector: Projector,
+    *,
+    alpha: float,
+    beta: float,
+    box_power: np.ndarray,
+    reference: np.ndarray,
+) -> float:
+    """``E_W(u) = (1/Z)||Pi(u) - D W||^2 + alpha N W_2^2 + beta ||h * (u - u_ref)||^2`` (eq. 6)."""
+    patches, _ = extract_patches(u, tau, stride=step, mode="periodic")
+    z = (tau / step) ** 2
+    data = np.sum((patches - coded) ** 2) / z
+    hist = np.sum((u - projector(u, None)) ** 2)
+    low = 0.0
+    if beta > 0:
+        filtered = np.fft.irfft2(
+            np.fft.rfft2(u - reference, axes=(0, 1)) * np.sqrt(box_power)[..., None],
+            s=u.shape[:2],
+            axes=(0, 1),
+        )
+        low = np.sum(filtered**2)
+    return float(data + alpha * hist + beta * low)

@@ -1,0 +1,296 @@
+"""Patch loops that synthesise a texture piece by piece from what is already there.
+
+The methods of this family differ in one step only: given the part of a window that is
+already synthesised, choose what goes into it, and join it to what is there. The loops that
+walk the output are written here once; the method passes its step in
+(``docs/architecture.md``, "Drivers").
+
+Two loop shapes, hence two functions:
+
+- :func:`fill_blocks` visits square blocks in raster order, row by row: image quilting
+  (Efros & Freeman 2001, section 2.1), LG, CLG and RCLG (Raad, Desolneux & Morel 2016,
+  Algorithm 2), every scale of MSLG (Algorithm 3) and the Gaussian resampling experiment
+  (Algorithm 1). The method gives ``choose(block)`` (the new patch, from the block's known
+  pixels) and ``paste(block, patch)`` (the block's new content: boundary cut, average or
+  overwrite, :mod:`texsyn.ops.seams`).
+- :func:`grow_pixels` grows single pixels outwards from a seed, in "onion-peel" passes
+  over the pixels that touch the synthesised region, with an acceptance threshold that
+  relaxes when a pass fills nothing: Efros & Leung (1999, section 2) and the coarsest level
+  of Gallagher & Kokaram's complex-wavelet method. The order is not raster, the unit is a
+  pixel, and pixels are searched in exact batches, so it does not fit the block loop; its
+  step is a :class:`~texsyn.ops.nonparametric.NonParametricSampler` (window distances and
+  the tolerance rule).
+
+See ``docs/methods/efros_leung.md``, ``docs/methods/quilting.md`` and
+``docs/methods/local_gaussian.md``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy import ndimage
+
+from ..ops.canvas import padded_canvas
+from ..ops.nonparametric import NonParametricSampler, schedule_batches
+from ..ops.progress import Reporter
+
+__all__ = ["Block", "block_canvas", "block_positions", "fill_blocks", "grow_pixels", "raster_positions"]
+
+
+# ---------------------------------------------------------------------------- block loop
+@dataclass(frozen=True)
+class Block:
+    """One block of the raster loop, as the method's step sees it.
+
+    Attributes
+    ----------
+    row, col : int
+        Top-left corner in the canvas.
+    values : ndarray, shape (n, n, C)
+        The canvas under the block (a view: do not write to it).
+    known : ndarray of bool, shape (n, n)
+        Which of its pixels are already synthesised (a view).
+    """
+
+    row: int
+    col: int
+    values: np.ndarray
+    known: np.ndarray
+
+
+def block_positions(length: int, size: int, step: int) -> np.ndarray:
+    """Corners ``0, step, 2 step, ...`` of the fewest blocks of ``size`` that cover ``length``.
+
+    At least one block; the canvas they cover is :func:`block_canvas`.
+
+    Examples
+    --------
+    >>> block_positions(25, 10, 6).tolist()
+    [0, 6, 12, 18]
+    """
+    count = (block_canvas((length, length), size, step)[0] - size) // step + 1
+    return np.arange(count) * step
+
+
+def block_canvas(shape: tuple[int, int], size: int, step: int) -> tuple[int, int]:
+    """The smallest canvas ``size + k step`` (``k >= 0``) on each side that covers ``shape``.
+
+    A grid of blocks of side ``size`` every ``step`` pixels (overlap ``size - step``), as
+    image quilting and LG use; the output is its top-left corner
+    (:func:`texsyn.ops.canvas.crop_to_output`).
+
+    Examples
+    --------
+    >>> block_canvas((25, 10), 10, 6)
+    (28, 10)
+    """
+    overlap = size - step
+    rows, cols = padded_canvas(shape, minimum=step, multiple=step, extra=-overlap)
+    return rows + overlap, cols + overlap
+
+
+def raster_positions(size: int, n: int, step: int) -> np.ndarray:
+    """Corners ``0, step, 2 step, ...`` up to ``size - n``, plus ``size - n``.
+
+    The block positions when the canvas is the image itself (Raad et al. 2016, Algorithms 1
+    and 3): the last block is moved back so that it ends on the border.
+
+    Examples
+    --------
+    >>> raster_positions(27, 10, 5).tolist()
+    [0, 5, 10, 15, 17]
+    """
+    pos = list(range(0, size - n + 1, step))
+    if pos[-1] != size - n:
+        pos.append(size - n)
+    return np.asarray(pos)
+
+
+def fill_blocks(
+    canvas: np.ndarray,
+    rows: Sequence[int] | np.ndarray,
+    cols: Sequence[int] | np.ndarray,
+    size: int,
+    choose: Callable[[Block], Any],
+    paste: Callable[[Block, Any], np.ndarray],
+    *,
+    seed: np.ndarray | None = None,
+    reporter: Reporter | None = None,
+) -> np.ndarray:
+    """Fill ``canvas`` block by block in raster order (rows, then columns within a row).
+
+    For every corner ``(x, y)`` of ``rows x cols``: ``patch = choose(block)``, then the
+    block becomes ``paste(block, patch)`` and all its pixels are known.
+
+    Parameters
+    ----------
+    canvas : ndarray, shape (H, W, C)
+        Written in place.
+    rows, cols : sequence of int
+        Block corners along each axis, in visiting order.
+    size : int
+        Block side ``n``.
+    choose : callable
+        ``choose(block) -> patch``: the method's choice for a :class:`Block` (what it
+        returns is passed on to ``paste`` as it is).
+    paste : callable
+        ``paste(block, patch) -> ndarray (n, n, C)``: the block's new content.
+    seed : ndarray, shape (n, n, C), optional
+        Content of the first block, placed without ``choose``/``paste``; it counts as done
+        but is not reported (Raad et al. 2016, Algorithm 2, line 1).
+    reporter : Reporter, optional
+        Receives ``(done, total)`` after every block, ``total = len(rows) * len(cols)``.
+
+    Returns
+    -------
+    ndarray of bool, shape (H, W)
+        Which canvas pixels were written.
+    """
+    known = np.zeros(canvas.shape[:2], dtype=bool)
+    total = len(rows) * len(cols)
+    done = 0
+    for x in rows:
+        for y in cols:
+            window = canvas[x : x + size, y : y + size]
+            mask = known[x : x + size, y : y + size]
+            if done == 0 and seed is not None:
+                window[...] = seed
+                mask[...] = True
+                done = 1
+                continue
+            block = Block(int(x), int(y), window, mask)
+            window[...] = paste(block, choose(block))
+            mask[...] = True
+            done += 1
+            if reporter is not None:
+                reporter(done, total)
+    return known
+
+
+# ---------------------------------------------------------------------------- pixel growth
+def grow_pixels(
+    sampler: NonParametricSampler,
+    shape: tuple[int, int],
+    *,
+    tolerance: float = 0.1,
+    max_error: float = 0.3,
+    seed_size: int = 3,
+    seed_block: tuple[int, int, int, int] | None = None,
+    rng: np.random.Generator,
+    reporter: Reporter | None = None,
+    max_batch: int = 256,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Grow a texture pixel by pixel from a seed (Efros and Leung 1999, section 2).
+
+    * A small seed copied from a random place of the exemplar sits at the centre of the
+      output (``seed_block=(row, col, height, width)`` names it instead; cropped, centred,
+      when larger than the output).
+    * Each pass collects the unfilled pixels with a filled 8-neighbour, shuffles them and
+      sorts them (stably) by decreasing number of filled pixels in their window.
+    * Each pixel, in that order, takes the centre of an exemplar window chosen by
+      :meth:`NonParametricSampler.match` (within ``(1 + tolerance)`` of the best distance),
+      provided that its distance is at most ``max_error``; a pass that fills nothing raises
+      ``max_error`` by 10 %.
+
+    Vectorised without changing the result: a pixel's template depends only on pixels
+    within ``r = w // 2`` of it, so each pass is split into batches of pixels that do not
+    interact (:func:`~texsyn.ops.nonparametric.schedule_batches`) and every batch is
+    searched with one matrix product. This is exactly the sequential order of the pass.
+
+    Parameters
+    ----------
+    sampler : NonParametricSampler
+        The exemplar's windows and the candidate rule (built once, in ``fit``).
+    shape : (int, int)
+        Output size.
+    tolerance : float
+        Candidates are the windows within ``(1 + tolerance)`` of the best distance.
+    max_error : float
+        Largest accepted distance per unit weight, at the start.
+    seed_size : int
+        Side of the random seed square.
+    seed_block : (int, int, int, int), optional
+        Exemplar block used as the seed.
+    rng : numpy.random.Generator
+    reporter : Reporter, optional
+        Receives ``(filled, total)`` after every pass.
+    max_batch : int
+        Most pixels searched in one matrix product (the result does not depend on it).
+
+    Returns
+    -------
+    values : ndarray, shape (H, W, C), float64
+        The synthesised channels (every pixel equals the exemplar pixel its source names).
+    source : ndarray of int64, shape (H, W, 2)
+        Exemplar ``(row, col)`` of every output pixel.
+    """
+    ex = sampler.exemplar
+    ex_h, ex_w, channels = ex.shape
+    height, width = shape
+    window = sampler.window
+    r = window // 2
+    batch_cap = int(max(8, min(max_batch, (1 << 23) // max(sampler.n_windows, 1))))
+    dy, dx = np.meshgrid(np.arange(window), np.arange(window), indexing="ij")
+
+    values = np.zeros((height + 2 * r, width + 2 * r, channels))
+    filled = np.zeros((height + 2 * r, width + 2 * r), dtype=bool)
+    source = np.full((height, width, 2), -1, dtype=np.int64)
+
+    if seed_block is None:
+        sh = sw = int(min(seed_size, height, width, ex_h, ex_w))
+        si, sj = int(rng.integers(ex_h - sh + 1)), int(rng.integers(ex_w - sw + 1))
+    else:
+        si, sj, sh, sw = (int(v) for v in seed_block)
+        if sh > height:
+            si, sh = si + (sh - height) // 2, height
+        if sw > width:
+            sj, sw = sj + (sw - width) // 2, width
+    top, left = (height - sh) // 2, (width - sw) // 2
+    values[top + r : top + r + sh, left + r : left + r + sw] = ex[si : si + sh, sj : sj + sw]
+    filled[top + r : top + r + sh, left + r : left + r + sw] = True
+    seed_rows, seed_cols = np.meshgrid(np.arange(sh), np.arange(sw), indexing="ij")
+    source[top : top + sh, left : left + sw, 0] = seed_rows + si
+    source[top : top + sh, left : left + sw, 1] = seed_cols + sj
+
+    n_filled, total = sh * sw, height * width
+    threshold = float(max_error)
+    ring = np.ones((3, 3), dtype=bool)
+    while n_filled < total:
+        # the pass: frontier pixels, shuffled, then the best-known first
+        inner = filled[r : r + height, r : r + width]
+        frontier = ndimage.binary_dilation(inner, structure=ring) & ~inner
+        rows, cols = np.nonzero(frontier)
+        known = ndimage.uniform_filter(filled.astype(np.float64), size=window, mode="constant")
+        perm = rng.permutation(rows.size)
+        rows, cols = rows[perm], cols[perm]
+        order = np.argsort(-np.rint(known[rows + r, cols + r] * window * window), kind="stable")
+        rows, cols = rows[order], cols[order]
+        batch_of, n_batches = schedule_batches(rows, cols, r, height, width, batch_cap)
+        uniforms = rng.random(rows.size)  # one draw per pixel, in list order
+        by_batch = np.argsort(batch_of, kind="stable")
+        bounds = np.searchsorted(batch_of[by_batch], np.arange(n_batches + 1))
+        filled_now = 0
+        for b in range(n_batches):
+            members = by_batch[bounds[b] : bounds[b + 1]]
+            pr, pc = rows[members], cols[members]
+            win_r = pr[:, None, None] + dy
+            win_c = pc[:, None, None] + dx
+            src, err = sampler.match(values[win_r, win_c], filled[win_r, win_c], tolerance, uniforms[members])
+            ok = err <= threshold
+            if not np.any(ok):
+                continue
+            pr, pc, src = pr[ok], pc[ok], src[ok]
+            values[pr + r, pc + r] = ex[src[:, 0], src[:, 1]]
+            filled[pr + r, pc + r] = True
+            source[pr, pc] = src
+            filled_now += int(ok.sum())
+        n_filled += filled_now
+        if filled_now == 0:
+            threshold *= 1.1
+        if reporter is not None:
+            reporter(n_filled, total)
+    return values[r : r + height, r : r + width], source

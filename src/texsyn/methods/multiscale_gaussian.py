@@ -1,0 +1,260 @@
+"""Multiscale locally Gaussian synthesis, MSLG (Raad, Desolneux & Morel 2016, section 4).
+
+Algorithm 3 of the paper, as :class:`MSLG` runs it:
+
+1. ``fit``: zoom the exemplar out ``K - 1`` times (Gaussian blur 1.4, sub-sampling by 2,
+   eq. 9); for every scale but the coarsest, split it into low and high frequencies and
+   build the search of the joint distance of eq. (14) (:class:`~texsyn.models.gaussian.PatchSource`);
+2. ``sample``: the coarse-to-fine walk (:func:`texsyn.drivers.coarse_to_fine.coarse_to_fine`)
+
+   - coarsest scale (line 3): LG with half-patch overlaps averaged (Algorithm 2 with the
+     average of eq. 15, :func:`texsyn.methods.single_scale_gaussian.single_scale`);
+   - each finer scale (:meth:`MSLG._fine_scale`, lines 5-17): zoom the coarser result in
+     (eq. 12) and keep it as the low frequencies; in raster order, sample the high
+     frequencies of each patch from the local Gaussian of the ``m`` exemplar patches
+     nearest for eq. (14) (overlap term plus low-resolution term);
+3. optionally, a short Portilla–Simoncelli synthesis started from the result (section 5,
+   Fig. 8).
+
+See ``docs/methods/local_gaussian.md``.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+import numpy as np
+
+from .._validation import OneOf, Range
+from ..drivers.coarse_to_fine import coarse_to_fine
+from ..drivers.raster import Block, fill_blocks, raster_positions
+from ..errors import InputError
+from ..models.gaussian import PatchSource
+from ..ops.canvas import crop_to_output, padded_canvas
+from ..ops.patches import as_channels
+from ..ops.progress import Reporter
+from ..transforms.pyramids import crop_to_multiple, gaussian_blur, zoom_in, zoom_out
+from ..transforms.steerable import max_scales
+from ._base import TextureSynthesizer
+from ._memory import fft_search_bytes, output_bytes, shape_dims
+from .portilla_simoncelli import PortillaSimoncelli
+from .single_scale_gaussian import PASTE, clamp_neighbours, draw, local_gaussian_bytes, single_scale
+
+__all__ = ["MSLG", "ZOOM_SIGMA"]
+
+#: Gaussian blur of the zoom-out and of the low/high split (paper, eq. 9 and Table 1)
+ZOOM_SIGMA = 1.4
+
+
+class MSLG(TextureSynthesizer):
+    """Multiscale locally Gaussian (MSLG) synthesis (Raad et al. 2016, Algorithm 3).
+
+    The exemplar is zoomed out ``n_scales - 1`` times (Gaussian blur 1.4, sub-sampling by
+    2). The coarsest scale is synthesised by LG with half-patch overlaps averaged (eq. 15);
+    each finer scale zooms the previous result in (Fourier zero-padding, eq. 12) and keeps
+    it as the low frequencies of every patch, sampling only the high frequencies from the
+    local Gaussian of the ``m`` exemplar patches nearest for the joint distance of eq. (14)
+    (overlap term plus low-resolution term). Small patches then reproduce the global
+    arrangement of macro-textures.
+
+    Parameters
+    ----------
+    patch_size : int
+        Even patch side ``n`` (the step is ``n / 2``).
+    n_neighbors : int
+        Number ``m`` of nearest exemplar patches per Gaussian.
+    n_scales : int
+        Number of scales ``K`` (1 is LG with overlap averaging).
+    mode : str
+        ``'sample'`` or ``'mean'``.
+    seed_patch : str
+        First patch at the coarsest scale: ``'gaussian'`` or ``'copy'``.
+    zoom_boundary : str
+        Boundary handling of the Fourier zoom-in: ``'symmetric'`` (mirror extension, no
+        border ringing) or ``'periodic'`` (the paper's literal formula).
+    post : str
+        ``'portilla_simoncelli'`` uses the MSLG result as the initial image of a short
+        Portilla-Simoncelli synthesis (Raad et al. 2016, section 5, Fig. 8); ``'none'`` skips it.
+    post_iterations : int
+        Portilla-Simoncelli iterations of the post-processing.
+
+    References
+    ----------
+    Raad, Desolneux, Morel, JMIV 2016, section 4, Algorithm 3, eqs. (9)-(15).
+    """
+
+    name = "mslg"
+    summary = "Multiscale locally Gaussian patch sampling"
+    reference = "Raad, Desolneux, Morel, JMIV 2016 (MSLG)"
+    has_source_map = False
+
+    def __init__(
+        self,
+        *,
+        patch_size: Annotated[int, Range(2, 256)] = 20,
+        n_neighbors: Annotated[int, Range(2, 10000)] = 20,
+        n_scales: Annotated[int, Range(1, 6)] = 2,
+        mode: Annotated[str, OneOf(("sample", "mean"))] = "sample",
+        seed_patch: Annotated[str, OneOf(("gaussian", "copy"))] = "gaussian",
+        zoom_boundary: Annotated[str, OneOf(("symmetric", "periodic"))] = "symmetric",
+        post: Annotated[str, OneOf(("none", "portilla_simoncelli"))] = "none",
+        post_iterations: Annotated[int, Range(1, 500)] = 10,
+    ):
+        self.patch_size = patch_size
+        self.n_neighbors = n_neighbors
+        self.n_scales = n_scales
+        self.mode = mode
+        self.seed_patch = seed_patch
+        self.zoom_boundary = zoom_boundary
+        self.post = post
+        self.post_iterations = post_iterations
+
+    def _check_params(self) -> None:
+        super()._check_params()
+        if self.patch_size % 2:
+            raise InputError(
+                f"parameter 'patch_size' of method 'mslg' must be even (the step is n/2), got {self.patch_size}"
+            )
+
+    def min_exemplar_size(self):
+        side = 2 ** (self.n_scales - 1) * (self.patch_size + 1)
+        return side, (
+            f"with n_scales={self.n_scales} the coarsest scale is 1/{2 ** (self.n_scales - 1)} of the "
+            f"exemplar and patch_size={self.patch_size} needs at least {self.patch_size + 1} pixels there"
+        )
+
+    def _post_method(self, exemplar_shape: tuple[int, ...]) -> PortillaSimoncelli:
+        """The (unfitted) Portilla–Simoncelli method of the final pass (section 5)."""
+        rows, cols = exemplar_shape[:2]
+        return PortillaSimoncelli(n_scales=max_scales((rows, cols)), n_iterations=self.post_iterations)
+
+    def _canvas(self, shape: tuple[int, int]) -> tuple[int, int]:
+        """Finest-scale canvas: a multiple of ``2^(K-1)``, at least a patch at the coarsest scale."""
+        big = 2 ** (self.n_scales - 1)
+        return padded_canvas(shape, minimum=big * self.patch_size, multiple=big)
+
+    def memory_terms(self, exemplar_shape, output_shape=None) -> dict[str, float]:
+        """FFT searches of every scale; the Fourier zoom-in of the finest scale (``docs/memory.md``).
+
+        The zoom-in transforms the mirror extension of each scale, a complex image four times
+        the size of the next one, so it dominates the sampling of large outputs.
+        """
+        h, w, c = shape_dims(exemplar_shape)
+        big = 2 ** (self.n_scales - 1)
+        hc, wc = (h // big) * big, (w // big) * big
+        kept_total, build_max = 8.0 * h * w * c, 0.0
+        for k in range(self.n_scales):
+            sh, sw = hc >> k, wc >> k
+            coarse = k == self.n_scales - 1
+            kept, build, _ = fft_search_bytes(sh, sw, c if coarse else 2 * c)
+            kept_total += kept + 8.0 * sh * sw * c * (1 if coarse else 2)
+            build_max = max(build_max, build + 24.0 * sh * sw * c)
+        terms = {"exemplar scales and their spectra": kept_total}
+        post = None
+        if self.post == "portilla_simoncelli":
+            post = self._post_method((h, w))
+            terms["Portilla-Simoncelli statistics"] = sum(post.memory_terms(exemplar_shape).values())
+        if output_shape is None:
+            terms["spectra construction"] = build_max
+            return terms
+        n = self.patch_size
+        rows, cols = self._canvas(output_shape[:2])
+        canvas = float(rows) * float(cols)
+        m = min(
+            self.n_neighbors,
+            max(1, ((hc >> (self.n_scales - 1)) - n + 1) * ((wc >> (self.n_scales - 1)) - n + 1)),
+        )
+        _, _, query = fft_search_bytes(hc, wc, 2 * c if self.n_scales > 1 else c, masks=9)
+        search = max(query, local_gaussian_bytes(m, n * n * c))
+        zoom = (280.0 if self.zoom_boundary == "symmetric" else 48.0) * c * canvas
+        if self.n_scales > 1:
+            terms["Fourier zoom-in of the finest scale"] = zoom + 8.0 * c * canvas / 4
+        terms["one search or one local Gaussian"] = search
+        terms["canvas, low-pass and mask"] = canvas * (16.0 * c + 1.0)
+        terms["output image"] = output_bytes(c, output_shape)
+        if post is not None:
+            terms["Portilla-Simoncelli refinement"] = sum(
+                post.memory_terms(exemplar_shape, output_shape).values()
+            )
+        return terms
+
+    def _fit(self, exemplar: np.ndarray) -> None:
+        ex = crop_to_multiple(as_channels(exemplar), 2 ** (self.n_scales - 1))
+        scales = [ex]
+        for _ in range(self.n_scales - 1):
+            scales.append(zoom_out(scales[-1], ZOOM_SIGMA))
+        self.scales_ = scales
+        n = self.patch_size
+        self.coarse_source_ = PatchSource.build(scales[-1], scales[-1], n)
+        self.fine_sources_ = []
+        for k in range(self.n_scales - 1):
+            low = gaussian_blur(scales[k], ZOOM_SIGMA)
+            high = scales[k] - low
+            stacked = np.concatenate([scales[k], low], axis=2)
+            self.fine_sources_.append(PatchSource.build(stacked, high, n))
+        self.post_ = None
+        if self.post == "portilla_simoncelli":
+            self.post_ = self._post_method(exemplar.shape).fit(exemplar)
+
+    def _sample(self, shape, rng, callback):
+        n, big, n_scales = self.patch_size, 2 ** (self.n_scales - 1), self.n_scales
+        canvas_h, canvas_w = self._canvas(shape)
+        sources = [self.coarse_source_] + self.fine_sources_
+        m = min(clamp_neighbours(self.n_neighbors, s, self.name) for s in sources)
+
+        def scale(level: int, coarser: np.ndarray | None) -> np.ndarray:
+            reporter = Reporter(callback, f"scale {n_scales - level}/{n_scales}")
+            if coarser is None:  # the coarsest scale: LG with averaged overlaps
+                return single_scale(
+                    self.scales_[-1],
+                    self.coarse_source_,
+                    (canvas_h // big, canvas_w // big),
+                    overlap=n // 2,
+                    m=m,
+                    model="lg",
+                    seam="average",
+                    mode=self.mode,
+                    sigma=0.0,
+                    theta=0.0,
+                    seed_patch=self.seed_patch,
+                    rng=rng,
+                    reporter=reporter,
+                )
+            low = zoom_in(coarser, boundary=self.zoom_boundary)
+            return self._fine_scale(low, self.fine_sources_[level], m, rng, reporter)
+
+        out = crop_to_output(coarse_to_fine(scale, n_scales)[0], shape)
+        if self.post_ is not None:
+            report = Reporter(callback, "portilla_simoncelli")
+            out = self.post_.refine(np.clip(out, 0.0, 1.0), callback=report.relabel(report.stage))
+        return out, None
+
+    def _fine_scale(
+        self, low: np.ndarray, source: PatchSource, m: int, rng, reporter: Reporter
+    ) -> np.ndarray:
+        """Alg. 3 lines 6-17: high frequencies sampled on top of the zoomed-in result ``low``.
+
+        ``source`` holds this scale's joint search and its high frequencies (lines 9-11); the
+        search's energy terms are cached for this call only, so the fitted source is never
+        changed.
+        """
+        n = self.patch_size
+        channels = low.shape[2]
+        low_weight = np.full((n, n, channels), 1.0 / (channels * n * n))
+        energies: dict = {}  # this call's cache of the search's energy terms
+
+        def choose(block: Block) -> np.ndarray:
+            # the joint distance of eq. (14): overlap term and low-resolution term, as channels
+            x, y, mask = block.row, block.col, block.known
+            k = int(mask.sum()) * channels
+            over = np.broadcast_to(mask[..., None] / max(k, 1), (n, n, channels))
+            weights = np.concatenate([over, low_weight], axis=2)
+            query = np.concatenate([block.values, low[x : x + n, y : y + n]], axis=2)
+            gauss = source.neighbour_gaussian(query, weights, m, energies=energies)  # lines 9-12
+            return low[x : x + n, y : y + n] + draw(gauss, self.mode, rng).reshape(n, n, channels)  # 13-14
+
+        out = np.zeros_like(low)
+        rows = raster_positions(low.shape[0], n, n // 2)
+        cols = raster_positions(low.shape[1], n, n // 2)
+        fill_blocks(out, rows, cols, n, choose, PASTE["none"], reporter=reporter)
+        return out

@@ -1,0 +1,238 @@
+"""Algorithm 2 of Raad, Desolneux & Morel (2016): single-scale locally Gaussian synthesis.
+
+The loop that LG, CLG and RCLG run (:mod:`texsyn.methods.gaussian`) and that MSLG runs at
+its coarsest scale (:mod:`texsyn.methods.multiscale_gaussian`, Algorithm 3 line 3), with
+the steps that differ between them. The paper's box, line by line:
+
+- line 1, a seed patch in the top-left corner: :func:`first_patch` (an exemplar patch,
+  copied or resampled);
+- lines 2-3, raster order in steps of ``n - o``: :func:`single_scale`, through
+  :func:`texsyn.drivers.raster.fill_blocks`;
+- lines 5-6, the ``m`` nearest exemplar patches and their Gaussian ``(mu, Sigma)``:
+  :meth:`texsyn.models.gaussian.PatchSource.neighbour_gaussian` (section 2.1, eq. 1);
+- line 7, the new patch: :func:`lg_patch` (LG, section 2.2) or :func:`conditional_patch`
+  (CLG, section 3.1, eqs. 4-6; RCLG, section 3.2, eqs. 7-8);
+- line 8, quilt it in: :data:`PASTE` (boundary cut, average of eq. 15, or overwrite).
+
+The overlap ``o`` is in pixels (:func:`overlap_pixels`). Every ``sample`` call makes its own
+cache of the search's energy terms (``energies``), so the fitted
+:class:`~texsyn.models.gaussian.PatchSource` is never changed (``docs/architecture.md``,
+"Fitted state"). See ``docs/methods/local_gaussian.md``.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable
+
+import numpy as np
+
+from ..drivers.raster import Block, block_canvas, block_positions, fill_blocks
+from ..errors import InputError
+from ..models.gaussian import LocalGaussian, PatchSource
+from ..ops.canvas import crop_to_output
+from ..ops.progress import Reporter
+from ..ops.seams import paste_average, paste_cut
+
+__all__ = [
+    "PASTE",
+    "clamp_neighbours",
+    "conditional_patch",
+    "draw",
+    "first_patch",
+    "lg_patch",
+    "local_gaussian_bytes",
+    "overlap_pixels",
+    "single_scale",
+]
+
+
+# ---------------------------------------------------------------------------- the inputs
+def overlap_pixels(overlap: int | float | None, patch_size: int, where: str) -> int:
+    """The overlap ``o`` in pixels: ``None`` is half the patch; a float in (0, 1) is a fraction.
+
+    A fraction is the meaning of round 1, kept with a :class:`DeprecationWarning`; it becomes
+    ``round(overlap * patch_size)`` pixels clipped to ``[1, patch_size - 1]``, as before, and
+    so does the default (``docs/architecture.md``, "Vocabulary": overlaps are in pixels).
+
+    Raises
+    ------
+    InputError
+        A float that is not a fraction in (0, 1), or pixels outside ``[1, patch_size - 1]``.
+
+    Examples
+    --------
+    >>> overlap_pixels(None, 10, "overlap"), overlap_pixels(3, 10, "overlap")
+    (5, 3)
+    """
+    n = int(patch_size)
+    if overlap is None:
+        return int(np.clip(round(0.5 * n), 1, n - 1))
+    if isinstance(overlap, (float, np.floating)):
+        if not 0 < overlap < 1:
+            raise InputError(
+                f"{where} is a number of pixels (an integer), or a deprecated fraction in (0, 1); "
+                f"got {overlap!r}"
+            )
+        warnings.warn(
+            f"{where} as a fraction of the patch is deprecated; give pixels "
+            f"(overlap={int(np.clip(round(overlap * n), 1, n - 1))} for {overlap!r} of {n})",
+            DeprecationWarning,
+            stacklevel=4,
+        )
+        return int(np.clip(round(overlap * n), 1, n - 1))
+    if not 1 <= int(overlap) < n:
+        raise InputError(f"{where} must be between 1 and patch_size - 1 = {n - 1} pixels, got {overlap!r}")
+    return int(overlap)
+
+
+def clamp_neighbours(m: int, source: PatchSource, name: str) -> int:
+    """``m``, or the number of exemplar patches when there are fewer (with a warning)."""
+    if m > source.n_anchors:
+        warnings.warn(
+            f"n_neighbors={m} is more than the {source.n_anchors} exemplar patches of method "
+            f"{name!r}; using {source.n_anchors}",
+            UserWarning,
+            stacklevel=4,
+        )
+        return source.n_anchors
+    return m
+
+
+def local_gaussian_bytes(m: int, dim: int) -> float:
+    """Gathered neighbour patches, the centred factor and a conditional draw of ``dim`` entries."""
+    return 24.0 * m * dim + 8.0 * m * m + 32.0 * dim
+
+
+# ---------------------------------------------------------------------------- the steps
+def draw(gauss: LocalGaussian, mode: str, rng: np.random.Generator) -> np.ndarray:
+    """A draw of ``gauss`` (line 7), or its mean (the most probable patch) when ``mode='mean'``."""
+    return gauss.mean if mode == "mean" else gauss.sample(rng)
+
+
+def first_patch(
+    source: PatchSource, exemplar: np.ndarray, m: int, how: str, mode: str, rng, energies: dict | None = None
+) -> np.ndarray:
+    """Line 1: the exemplar patch at ``t0``, the first draw of ``rng``, copied or resampled.
+
+    ``how='copy'`` copies it (the paper's Fig. 4); ``'gaussian'`` draws from (or, with
+    ``mode='mean'``, takes the mean of) the local Gaussian of its neighbours.
+    """
+    n = source.size
+    t0 = int(rng.integers(source.n_anchors))
+    i, j = np.unravel_index(t0, source.anchor_shape)
+    patch = exemplar[i : i + n, j : j + n]
+    if how == "copy":
+        return patch.copy()
+    gauss = source.neighbour_gaussian(patch, None, m, energies=energies)
+    return draw(gauss, mode, rng).reshape(patch.shape)
+
+
+def lg_patch(
+    block: Block, source: PatchSource, m: int, mode: str, rng, energies: dict | None = None
+) -> np.ndarray:
+    """Lines 5-7 for LG: a draw of the local Gaussian of the block's neighbours (section 2.2)."""
+    gauss = source.neighbour_gaussian(block.values, block.known.astype(np.float64), m, energies=energies)
+    return draw(gauss, mode, rng).reshape(block.values.shape)
+
+
+def conditional_patch(
+    block: Block,
+    source: PatchSource,
+    m: int,
+    mode: str,
+    sigma: float,
+    theta: float | None,
+    rng,
+    energies: dict | None = None,
+) -> np.ndarray:
+    """Lines 5-7 for CLG (``theta=None``) and RCLG: the Gaussian conditioned on the overlap.
+
+    RCLG first moves the overlap values by noise of std ``theta`` (ancestral sampling of
+    eqs. 7-8; drawn in ``'sample'`` mode even when ``theta`` is 0), then conditions on them
+    (eqs. 4-6, :meth:`~texsyn.models.gaussian.LocalGaussian.conditional`).
+    """
+    old, mask = block.values, block.known
+    gauss = source.neighbour_gaussian(old, mask.astype(np.float64), m, energies=energies)
+    entries = np.broadcast_to(mask[..., None], old.shape).ravel()
+    given = old.ravel()[entries]
+    if theta is not None and mode == "sample":
+        given = given + theta * rng.standard_normal(given.size)
+    flat = np.empty(old.size)
+    flat[entries] = given
+    flat[~entries] = gauss.conditional(entries, given, sigma, None if mode == "mean" else rng)
+    return flat.reshape(old.shape)
+
+
+#: line 8, how a new patch joins the block: boundary cut, average (eq. 15) or overwrite
+PASTE: dict[str, Callable[[Block, np.ndarray], np.ndarray]] = {
+    "quilt": lambda block, new: paste_cut(block.values, new, block.known),
+    "average": lambda block, new: paste_average(block.values, new, block.known),
+    "none": lambda block, new: new,
+}
+
+
+# ---------------------------------------------------------------------------- the loop
+def single_scale(
+    exemplar: np.ndarray,
+    source: PatchSource,
+    shape: tuple[int, int],
+    *,
+    overlap: int,
+    m: int,
+    model: str,
+    seam: str,
+    mode: str,
+    sigma: float,
+    theta: float,
+    seed_patch: str,
+    rng: np.random.Generator,
+    reporter: Reporter | None,
+) -> np.ndarray:
+    """Algorithm 2 (LG, CLG or RCLG) on an enlarged canvas, cropped to ``shape``.
+
+    1. a seed patch in the top-left corner (:func:`first_patch`);
+    2. in raster order, blocks of side ``n`` every ``n - overlap`` pixels: each block's patch
+       from the local Gaussian of its ``m`` neighbours (``model='lg'``: :func:`lg_patch`;
+       ``'clg'``, ``'rclg'``: conditioned on the overlap, :func:`conditional_patch`), joined
+       by ``seam`` (:data:`PASTE`).
+
+    Parameters
+    ----------
+    exemplar : ndarray, shape (H, W, C)
+        The scale synthesised (where the seed patch is read).
+    source : PatchSource
+        Its patches and their search (built by ``fit``; not changed here).
+    shape : (int, int)
+        Output size.
+    overlap, m : int
+        Overlap ``o`` in pixels and neighbours ``m``.
+    model : {'lg', 'clg', 'rclg'}
+    seam : {'quilt', 'average', 'none'}
+    mode : {'sample', 'mean'}
+    sigma, theta : float
+        Regularisation (CLG, RCLG) and overlap noise (RCLG).
+    seed_patch : {'gaussian', 'copy'}
+    rng : numpy.random.Generator
+    reporter : Reporter or None
+        Receives ``(done, total)`` after every patch but the seed.
+    """
+    n = source.size
+    step = n - overlap
+    energies: dict = {}  # this call's cache of the search's energy terms
+    canvas = np.zeros(block_canvas(shape, n, step) + (exemplar.shape[2],))
+    first = first_patch(source, exemplar, m, seed_patch, mode, rng, energies)
+    if model == "lg":
+
+        def choose(block: Block) -> np.ndarray:
+            return lg_patch(block, source, m, mode, rng, energies)
+
+    else:
+        moved = theta if model == "rclg" else None
+
+        def choose(block: Block) -> np.ndarray:
+            return conditional_patch(block, source, m, mode, sigma, moved, rng, energies)
+
+    rows, cols = block_positions(shape[0], n, step), block_positions(shape[1], n, step)
+    fill_blocks(canvas, rows, cols, n, choose, PASTE[seam], seed=first, reporter=reporter)
+    return crop_to_output(canvas, shape)
