@@ -13,7 +13,8 @@ import texsyn
 from texsyn._validation import human_bytes, check_output_shape, memory_limit_bytes, parse_memory_size
 from texsyn.cli import main
 from texsyn.errors import InputError, MemoryLimitError
-from texsyn.ops.patch_wavelet import PatchWaveletTransform, planned_widths
+from texsyn.models.patch_wavelet import PatchWaveletTransform
+from texsyn.transforms.patch_wavelet import planned_widths
 from conftest import FAST_PARAMS, fast_method
 
 VAR = "TEXSYN_MEMORY_LIMIT"

@@ -22,7 +22,7 @@ from scipy import ndimage
 
 import texsyn
 from texsyn.errors import InputError
-from texsyn.methods.sparse import _box_power, image_energy
+from texsyn.ops.sparse import box_power as _box_power, image_energy
 from texsyn.methods.wavelet_sampling import block_indices
 from texsyn.ops import HistogramMatcher, extract_patches
 from texsyn.ops.color import ColorPCA
@@ -365,7 +365,7 @@ def test_patch_wavelet_random_state_seeds_the_embedding():
 def test_patch_wavelet_max_resolution_sets_the_block_means_of_wide_windows():
     """``max_resolution=4``: a window of width 8 is described by its 4x4 means of 2x2 blocks
     (16 values per channel, not 64), the means of the full 8x8 window's blocks."""
-    from texsyn.ops.patch_wavelet import ExemplarWindows
+    from texsyn.models.patch_wavelet import ExemplarWindows
 
     exemplar = texsyn.data.exemplar("brick", size=32)
     transform = texsyn.make_method("patch_wavelet", max_resolution=4, exemplar_boundary="periodic").fit(exemplar).transform_
@@ -384,7 +384,7 @@ def test_patch_wavelet_max_resolution_sets_the_block_means_of_wide_windows():
 )
 def test_patch_wavelet_window_width_doubles_per_level_between_its_bounds(min_width, max_width, expected):
     """Level j uses ``clamp(2^j, min_width, max_width)``, max_width at most half the exemplar."""
-    from texsyn.ops.patch_wavelet import PatchWaveletTransform
+    from texsyn.models.patch_wavelet import PatchWaveletTransform
 
     transform = PatchWaveletTransform(texsyn.data.exemplar("brick", size=64), min_width=min_width, max_width=max_width)
     assert [transform.width(level) for level in range(1, 7)] == expected
@@ -427,7 +427,7 @@ def test_lle_grows_the_neighbourhood_until_the_graph_is_connected():
     """Two far-apart triples and ``n_neighbors=2``: the 2-NN graph has two parts, so LLE
     enlarges the neighbourhood (by 4, capped at n - 1 = 5) until it is connected, says so,
     and its 1-D embedding separates the triples."""
-    from texsyn.ops.patch_wavelet import lle_embedding
+    from texsyn.models.patch_wavelet import lle_embedding
 
     rng = np.random.default_rng(0)
     X = np.concatenate([rng.normal(0.0, 0.1, (3, 4)), rng.normal(5.0, 0.1, (3, 4))])

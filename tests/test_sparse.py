@@ -7,7 +7,7 @@ import pytest
 
 import texsyn
 from texsyn.io import load_fitted, save_fitted
-from texsyn.methods.sparse import _box_power, image_energy, image_update, upsample_bicubic
+from texsyn.ops.sparse import box_power as _box_power, image_energy, image_update, upsample_bicubic
 from texsyn.ops import HistogramMatcher, average_patches, extract_patches
 from texsyn.ops.graphcut import cut_value, graphcut_reassemble, kwatra_costs, seam_take_old
 from texsyn.ops.sparse import batch_omp, constrained_matching_pursuit, ksvd

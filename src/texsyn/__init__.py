@@ -1,5 +1,9 @@
 """texsyn: exemplar-based texture synthesis behind one API.
 
+The package front (``docs/architecture.md``, layer 11): :func:`synthesize`, :func:`modify`,
+:func:`animate`, the method registry (:data:`METHODS`, :func:`make_method`) and the saved
+models (:func:`save`, :func:`load`; ``docs/persistence.md``).
+
 >>> import texsyn
 >>> exemplar = texsyn.data.exemplar("brick")
 >>> texture = texsyn.synthesize(exemplar, method="quilting", shape=(256, 256), rng=0)
@@ -21,7 +25,7 @@ from .methods import (
     get_method,
     make_method,
 )
-
+from .persistence import load, save
 
 __all__ = [
     "animate",
@@ -34,8 +38,10 @@ __all__ = [
     "__version__",
     "data",
     "get_method",
+    "load",
     "make_method",
     "modify",
+    "save",
     "synthesize",
 ]
 
@@ -65,6 +71,15 @@ def synthesize(
     Returns
     -------
     ndarray of float32 in [0, 1], same rank and channels as the exemplar.
+
+    Examples
+    --------
+    >>> exemplar = data.exemplar("gravel", size=32)
+    >>> texture = synthesize(exemplar, "random_phase", shape=(48, 64), rng=0)
+    >>> texture.shape, texture.dtype
+    ((48, 64), dtype('float32'))
+    >>> bool((texture == synthesize(exemplar, "random_phase", shape=(48, 64), rng=0)).all())
+    True
     """
     return make_method(method, **params).fit(exemplar).sample(shape, rng=rng)
 

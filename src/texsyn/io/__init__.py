@@ -4,10 +4,16 @@ Read: PNG, JPEG, TIFF, BMP, GIF (first frame), WebP, PBM/PGM/PPM; 8 and 16 bit; 
 alpha, RGB, RGBA and palette images. Write: PNG, JPEG and TIFF (8 bit; 16 bit for PNG and
 TIFF on request), always through a temporary file renamed into place, so that a failed or
 interrupted write never leaves a partial file.
+
+``save_fitted`` and ``load_fitted`` (texsyn 0.1) still resolve, with a
+:class:`DeprecationWarning`, through the module ``__getattr__`` below: fitted models are
+saved with :func:`texsyn.save` and loaded with :func:`texsyn.load` (``docs/persistence.md``).
 """
 
+import importlib
+import warnings
+
 from ..errors import ImageReadError
-from .fitted import load_fitted, save_fitted
 from .headers import ImageHeader, check_image_size, max_image_pixels, read_image_header
 from .reading import READ_FORMATS, read_image
 from .writing import (
@@ -37,6 +43,23 @@ __all__ = [
     "atomic_write",
     "OutputSet",
     "sidecar_path",
-    "save_fitted",
-    "load_fitted",
 ]
+
+#: deprecated names and what replaces them
+_DEPRECATED = {
+    "save_fitted": "texsyn.save(model, path, overwrite=True)",
+    "load_fitted": "texsyn.load(path)",
+}
+
+
+def __getattr__(name: str):
+    """Resolve the deprecated names of :data:`_DEPRECATED`, with a warning, lazily."""
+    if name in _DEPRECATED:
+        warnings.warn(
+            f"texsyn.io.{name} is deprecated; use {_DEPRECATED[name]}", DeprecationWarning, stacklevel=2
+        )
+        with warnings.catch_warnings():  # the alias module's own warning would repeat this one
+            warnings.simplefilter("ignore", DeprecationWarning)
+            module = importlib.import_module(".fitted", __name__)
+        return getattr(module, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

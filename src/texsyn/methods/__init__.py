@@ -1,23 +1,46 @@
-"""Synthesis methods, one class each, and the registry that the front doors read."""
+"""Synthesis methods, one class each, and the registry that the front doors read.
+
+Layer 7 (``docs/architecture.md``): each method is a thin class holding its parameters
+(the ``__init__`` signature, read as :class:`ParamSpec`), building its model in ``fit`` and
+calling its synthesis loop in ``sample``. :data:`METHODS` maps each name to its class.
+"""
 
 from __future__ import annotations
 
-from ._base import ParamSpec, Progress, SynthesisResult, TextureSynthesizer
+from ..errors import InputError
+from ..ops.progress import Progress
+from ._base import SynthesisResult, TextureSynthesizer
+from ._params import ParamSpec
 from .efros_leung import EfrosLeung
 from .gaussian import CLG, LG, MSLG, RCLG
 from .grouplets import Frame, Grouplets
 from .heeger_bergen import HeegerBergen
-from .quilting import Quilting
 from .patch_wavelet import Modification, PatchWavelet
 from .portilla_simoncelli import PortillaSimoncelli
+from .quilting import Quilting
 from .random_phase import RandomPhase
 from .sparse import ConstrainedSparse
 from .wavelet_sampling import ComplexWaveletSampling
 from .wei_levoy import WeiLevoy
-from ..errors import InputError
 
 METHODS: dict[str, type[TextureSynthesizer]] = {
-    cls.name: cls for cls in (Quilting, EfrosLeung, HeegerBergen, RandomPhase, LG, CLG, RCLG, MSLG, ConstrainedSparse, ComplexWaveletSampling, WeiLevoy, PatchWavelet, Grouplets, PortillaSimoncelli)
+    cls.name: cls
+    for cls in (
+        Quilting,
+        EfrosLeung,
+        HeegerBergen,
+        RandomPhase,
+        LG,
+        CLG,
+        RCLG,
+        MSLG,
+        ConstrainedSparse,
+        ComplexWaveletSampling,
+        WeiLevoy,
+        PatchWavelet,
+        Grouplets,
+        PortillaSimoncelli,
+    )
 }
 
 __all__ = [
@@ -62,7 +85,5 @@ def make_method(name: str, **params) -> TextureSynthesizer:
     unknown = sorted(set(params) - set(specs))
     if unknown:
         allowed = ", ".join(specs) if specs else "none"
-        raise InputError(
-            f"unknown parameter {unknown[0]!r} for method {name!r}; allowed: {allowed}"
-        )
+        raise InputError(f"unknown parameter {unknown[0]!r} for method {name!r}; allowed: {allowed}")
     return cls(**params)

@@ -1,37 +1,39 @@
-"""The method contract: fit once, sample many (DESIGN.md, "Methods").
+"""The method contract: fit once, sample many (``docs/architecture.md``, "methods").
 
 Every method is a subclass of :class:`TextureSynthesizer`. Its ``__init__`` signature is the
 single place where hyperparameters, their defaults and their allowed ranges live:
 
     def __init__(self, *, patch_size: Annotated[int, Range(2, 512)] = 32, ...)
 
-The command line, ``texsyn methods``, :meth:`get_params` and the report all read it.
+The command line, ``texsyn methods``, :meth:`get_params` and the report all read it
+(:class:`~texsyn.methods._params.ParamSpec`). ``fit`` stores everything ``sample`` needs in
+attributes ending in ``_``; ``sample`` never changes them, and :func:`texsyn.save` /
+:func:`texsyn.load` keep them in a file (``docs/persistence.md``).
 """
 
 from __future__ import annotations
 
 import functools
-import inspect
-import re
-import typing
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable, ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
 from .._validation import (
-    OneOf,
-    Range,
-    human_bytes,
     as_exemplar,
     check_memory,
     check_output_shape,
+    human_bytes,
     normalize_rng,
 )
-from ..errors import InputError, InputTypeError
-from ._memory import pixel_count, shape_dims
+from ..errors import InputError
+from ..ops.canvas import default_output_shape
 from ..ops.linalg import fixed_order
+from ..ops.progress import Progress
+from ._memory import pixel_count, planned_exemplar_shape, shape_dims
+from ._params import ParamSpec, read_param_specs
 
 __all__ = ["ParamSpec", "Progress", "SynthesisResult", "TextureSynthesizer"]
 
@@ -51,177 +53,6 @@ class SynthesisResult:
 
     image: np.ndarray
     source_map: np.ndarray | None = None
-
-
-@dataclass(frozen=True)
-class Progress:
-    """What a method reports to ``callback`` while it works.
-
-    Attributes
-    ----------
-    stage : str
-        Short name of the current stage (``"blocks"``, ``"iteration"``, ``"pixels"``...).
-    done, total : int
-        Work units finished so far and in all for this stage.
-    image : ndarray or None
-        An intermediate image, when the method has one worth showing.
-    info : dict or None
-        Method-specific diagnostics (codes, usage counts, energies...).
-    """
-
-    stage: str
-    done: int
-    total: int
-    image: np.ndarray | None = None
-    info: dict | None = None
-
-
-@dataclass(frozen=True)
-class ParamSpec:
-    """A hyperparameter as read from a method's ``__init__`` signature."""
-
-    name: str
-    type: type
-    default: Any
-    allowed: Range | OneOf | None
-    optional: bool
-    description: str
-
-    def describe_allowed(self) -> str:
-        parts = []
-        if self.type is tuple:
-            each = f" in {self.allowed.describe()}" if self.allowed is not None else ""
-            parts.append(f"a number or comma-separated numbers{each}")
-        elif self.allowed is not None:
-            parts.append(self.allowed.describe())
-        elif self.type is bool:
-            parts.append("true or false")
-        else:
-            parts.append(self.type.__name__)
-        if self.optional:
-            parts.append("or none")
-        return " ".join(parts)
-
-    def check(self, value: Any, method: str) -> Any:
-        """Validate (and lightly coerce, e.g. int to float) one value; return it."""
-        where = f"parameter {self.name!r} of method {method!r}"
-        if value is None:
-            if self.optional:
-                return None
-            raise InputError(f"{where} must be {self.describe_allowed()}, got None")
-        kind = self.type
-        if kind is bool:
-            if not isinstance(value, (bool, np.bool_)):
-                raise InputTypeError(f"{where} must be true or false, got {value!r}")
-            value = bool(value)
-        elif kind is int:
-            if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
-                if isinstance(value, (float, np.floating)) and float(value).is_integer():
-                    value = int(value)
-                else:
-                    raise InputTypeError(f"{where} must be an integer, got {value!r}")
-            value = int(value)
-        elif kind is float:
-            if isinstance(value, (bool, np.bool_)) or not isinstance(
-                value, (int, float, np.integer, np.floating)
-            ):
-                raise InputTypeError(f"{where} must be a number, got {value!r}")
-            value = float(value)
-            if not np.isfinite(value):
-                raise InputError(f"{where} must be finite, got {value!r}")
-        elif kind is str:
-            if not isinstance(value, str):
-                raise InputTypeError(f"{where} must be a string, got {value!r}")
-        elif kind is tuple:
-            return self._check_numbers(value, where)
-        if self.allowed is not None and not self.allowed.contains(value):
-            raise InputError(f"{where} must be in {self.allowed.describe()}, got {value!r}")
-        return value
-
-    def _check_numbers(self, value: Any, where: str) -> tuple[float, ...]:
-        """A number or a non-empty sequence of numbers, each finite and allowed."""
-        items = [value] if np.ndim(value) == 0 else list(np.ravel(np.asarray(value, dtype=object)))
-        if not items:
-            raise InputError(f"{where} must be {self.describe_allowed()}, got an empty list")
-        out = []
-        for item in items:
-            if isinstance(item, (bool, np.bool_)) or not isinstance(item, (int, float, np.integer, np.floating)):
-                raise InputTypeError(f"{where} must be {self.describe_allowed()}, got {value!r}")
-            x = float(item)
-            if not np.isfinite(x) or (self.allowed is not None and not self.allowed.contains(x)):
-                raise InputError(f"{where} must be {self.describe_allowed()}, got {value!r}")
-            out.append(x)
-        return tuple(out)
-
-    def parse(self, text: str, method: str) -> Any:
-        """Convert a command-line string to this parameter's type, then :meth:`check` it."""
-        where = f"parameter {self.name!r} of method {method!r}"
-        low = text.strip().lower()
-        if self.optional and low in ("none", "auto", ""):
-            return None
-        try:
-            if self.type is bool:
-                if low in ("1", "true", "yes", "on"):
-                    value: Any = True
-                elif low in ("0", "false", "no", "off"):
-                    value = False
-                else:
-                    raise ValueError
-            elif self.type is int:
-                value = int(text)
-            elif self.type is float:
-                value = float(text)
-            elif self.type is tuple:
-                value = tuple(float(part) for part in text.split(","))
-            else:
-                value = text
-        except ValueError:
-            raise InputError(
-                f"{where} must be {self.describe_allowed()}, got {text!r}"
-            ) from None
-        return self.check(value, method)
-
-
-def _planned_exemplar_shape(image: Any) -> tuple[int, ...] | None:
-    """The shape :func:`as_exemplar` would give ``image``, read without converting it.
-
-    ``None`` when the input is not an array of a shape ``as_exemplar`` accepts (it then
-    raises the precise error itself).
-    """
-    if isinstance(image, (str, bytes)) or not hasattr(image, "shape"):
-        return None
-    shape = tuple(int(s) for s in np.shape(image))
-    if len(shape) == 2 and min(shape) >= 2:
-        return shape
-    if len(shape) == 3 and min(shape[:2]) >= 2 and shape[2] in (1, 2, 3, 4):
-        channels = {1: 1, 2: 1, 3: 3, 4: 3}[shape[2]]
-        return shape[:2] if channels == 1 else shape[:2] + (3,)
-    return None
-
-
-def _docstring_params(doc: str | None) -> dict[str, str]:
-    """First sentence of each entry of a numpydoc ``Parameters`` section."""
-    if not doc:
-        return {}
-    text = inspect.cleandoc(doc)
-    match = re.search(r"^Parameters\n-+\n(.*?)(?:\n\n[A-Z][A-Za-z ]+\n-+\n|\Z)", text, re.S | re.M)
-    if not match:
-        return {}
-    out: dict[str, str] = {}
-    name = None
-    lines: list[str] = []
-    for line in match.group(1).splitlines():
-        head = re.match(r"^(\w+)\s*:", line)
-        if head and not line.startswith(" "):
-            if name:
-                out[name] = " ".join(lines)
-            name, lines = head.group(1), []
-        elif name and line.strip():
-            lines.append(line.strip())
-    if name:
-        out[name] = " ".join(lines)
-    out = {k: v.replace("``", "") for k, v in out.items()}
-    return {k: re.split(r"(?<=\.)\s(?=[A-Z])", v, maxsplit=1)[0] for k, v in out.items()}
 
 
 class TextureSynthesizer:
@@ -247,6 +78,9 @@ class TextureSynthesizer:
     #: factor on the sum of :meth:`memory_terms` for the arrays too small to be modelled one
     #: by one and the allocator's slack; 1 MiB is added for small objects (``docs/memory.md``)
     memory_margin: ClassVar[float] = 1.25
+    #: parameters that change what ``fit`` learns, for methods whose saved models hold the
+    #: learned arrays (:meth:`fitted_arrays`): :func:`texsyn.load` refuses new values for them
+    learned_params: ClassVar[tuple[str, ...]] = ()
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -288,36 +122,7 @@ class TextureSynthesizer:
     @classmethod
     def param_specs(cls) -> dict[str, ParamSpec]:
         """The hyperparameters, read from the ``__init__`` signature and docstring."""
-        sig = inspect.signature(cls.__init__)
-        hints = typing.get_type_hints(cls.__init__, include_extras=True)
-        docs = _docstring_params(cls.__doc__)
-        specs = {}
-        for pname, param in sig.parameters.items():
-            if pname == "self" or param.kind in (param.VAR_KEYWORD, param.VAR_POSITIONAL):
-                continue
-            hint = hints.get(pname, type(param.default))
-            allowed = None
-            if typing.get_origin(hint) is typing.Annotated:
-                base, *extras = typing.get_args(hint)
-                allowed = next((e for e in extras if isinstance(e, (Range, OneOf))), None)
-            else:
-                base = hint
-            if typing.get_origin(base) is tuple:
-                base = tuple
-            optional = False
-            args = typing.get_args(base)
-            if args and type(None) in args:
-                optional = True
-                base = next(a for a in args if a is not type(None))
-            specs[pname] = ParamSpec(
-                name=pname,
-                type=base,
-                default=param.default,
-                allowed=allowed,
-                optional=optional,
-                description=docs.get(pname, ""),
-            )
-        return specs
+        return read_param_specs(cls.__init__, cls.__doc__)
 
     def get_params(self) -> dict[str, Any]:
         """Current hyperparameters as a dict (scikit-learn style)."""
@@ -383,7 +188,7 @@ class TextureSynthesizer:
         int
         """
         self._check_params()
-        out = None if output_shape is None else tuple(int(v) for v in tuple(output_shape)[:2])
+        out = None if output_shape is None else (int(output_shape[0]), int(output_shape[1]))
         terms = self.memory_terms(tuple(exemplar_shape), out)
         return int(np.ceil(self._memory_total(terms)))
 
@@ -404,7 +209,7 @@ class TextureSynthesizer:
         self._check_params()
         self._check_memory(tuple(exemplar_shape))
         if output_shape is not None:
-            self._check_memory(tuple(exemplar_shape), tuple(int(v) for v in tuple(output_shape)[:2]))
+            self._check_memory(tuple(exemplar_shape), (int(output_shape[0]), int(output_shape[1])))
 
     def _memory_total(self, terms: dict[str, float]) -> float:
         """:attr:`memory_margin` times the terms, plus 1 MiB of small arrays and objects."""
@@ -442,13 +247,39 @@ class TextureSynthesizer:
             advice=advice,
         )
 
+    # ------------------------------------------------------------------ saved models
+    def fitted_arrays(self) -> dict[str, np.ndarray]:
+        """What ``fit`` learned that :func:`texsyn.save` stores besides the exemplar.
+
+        Empty by default: ``fit`` is a deterministic function of the exemplar and the
+        parameters (seeded, sums in a fixed order), so :func:`texsyn.load` fits the saved
+        exemplar again and gets the same model bit for bit. A method whose fit is expensive
+        returns its model's arrays (``sparse``: the dictionaries); ``docs/persistence.md``.
+        """
+        self._require_fitted()
+        return {}
+
+    def restore_fitted(self, exemplar: np.ndarray, arrays: dict[str, np.ndarray]) -> TextureSynthesizer:
+        """Make this unfitted instance the model saved with ``exemplar`` and ``arrays``.
+
+        The default fits ``exemplar`` again; a method that overrides :meth:`fitted_arrays`
+        rebuilds its model from ``arrays`` and overrides this too. Returns ``self``; raises
+        :class:`~texsyn.errors.InputError` for arrays that do not belong to the method.
+        """
+        if arrays:
+            raise InputError(
+                f"a saved model of method {self.name!r} holds no arrays besides the exemplar, "
+                f"got {', '.join(sorted(arrays))}"
+            )
+        return self.fit(exemplar)
+
     # ------------------------------------------------------------------ fit / sample
     def min_exemplar_size(self) -> tuple[int, str]:
         """Smallest exemplar side this configuration accepts, and why."""
         return 2, "at least 2x2 pixels"
 
     @fixed_order
-    def fit(self, exemplar: np.ndarray) -> "TextureSynthesizer":
+    def fit(self, exemplar: np.ndarray) -> TextureSynthesizer:
         """Validate the exemplar and learn everything that depends only on it.
 
         Parameters
@@ -467,15 +298,14 @@ class TextureSynthesizer:
             ``TEXSYN_MEMORY_LIMIT`` (``docs/memory.md``).
         """
         self._check_params()
-        planned = _planned_exemplar_shape(exemplar)
+        planned = planned_exemplar_shape(exemplar)
         if planned is not None:  # before the (float64) conversion of a large array
             self._check_memory(planned)
         ex = as_exemplar(exemplar)
         side, why = self.min_exemplar_size()
         if min(ex.shape[:2]) < side:
             raise InputError(
-                f"exemplar of {ex.shape[1]}x{ex.shape[0]} pixels is too small for method "
-                f"{self.name!r}: {why}"
+                f"exemplar of {ex.shape[1]}x{ex.shape[0]} pixels is too small for method {self.name!r}: {why}"
             )
         if planned != ex.shape:
             self._check_memory(ex.shape)
@@ -532,9 +362,7 @@ class TextureSynthesizer:
     ) -> SynthesisResult:
         """Like :meth:`sample`, but also return the source map of copy-based methods."""
         ex = self._require_fitted()
-        if shape is None:
-            shape = (2 * ex.shape[0], 2 * ex.shape[1])
-        out_shape = check_output_shape(shape)
+        out_shape = check_output_shape(default_output_shape(ex.shape) if shape is None else shape)
         self._check_memory(ex.shape, out_shape)
         generator = normalize_rng(rng)
         image, source = self._sample(out_shape, generator, callback)

@@ -10,7 +10,36 @@ ones only during one call.
 
 from __future__ import annotations
 
+from typing import Any
+
+import numpy as np
+
 __all__: list[str] = []
+
+
+def planned_exemplar_shape(image: Any) -> tuple[int, ...] | None:
+    """The shape :func:`texsyn._validation.as_exemplar` would give ``image``, read without converting it.
+
+    For the memory check of :meth:`TextureSynthesizer.fit` before the float64 conversion of
+    a large array. ``None`` when the input is not an array of a shape ``as_exemplar``
+    accepts (it then raises the precise error itself).
+
+    Examples
+    --------
+    >>> planned_exemplar_shape(np.zeros((4, 5, 4), dtype=np.uint8))
+    (4, 5, 3)
+    >>> planned_exemplar_shape("gravel.png") is None
+    True
+    """
+    if isinstance(image, (str, bytes)) or not hasattr(image, "shape"):
+        return None
+    shape = tuple(int(s) for s in np.shape(image))
+    if len(shape) == 2 and min(shape) >= 2:
+        return shape
+    if len(shape) == 3 and min(shape[:2]) >= 2 and shape[2] in (1, 2, 3, 4):
+        channels = {1: 1, 2: 1, 3: 3, 4: 3}[shape[2]]
+        return shape[:2] if channels == 1 else shape[:2] + (3,)
+    return None
 
 
 def shape_dims(shape: tuple[int, ...]) -> tuple[int, int, int]:
@@ -66,3 +95,33 @@ def nonparametric_bytes(
     grow = padded * (8.0 * c + 33.0) + 16.0 * float(oh) * float(ow) + 64.0 * (oh + ow + 8 * r)
     grow += batch * (48.0 * dim + 16.0 * k + 24.0 * window * window)
     return kept, grow
+
+
+def sparse_fit_bytes(
+    h: int, w: int, c: int, *, scales: int, patch_size: int, sparsity: int, n_atoms: int, ksvd_training: int
+) -> tuple[float, float, int]:
+    """``(kept, peak, atoms)`` of fitting the ``sparse`` model on an ``h x w x c`` exemplar.
+
+    ``kept``: the exemplar's scales, their dictionaries and statistics; ``peak``: the largest
+    of kept plus one scale's ``K`` patches with K-SVD's batch OMP on ``ksvd_training`` of them
+    or the pursuit of all of them (``N x K`` correlations and codes); ``atoms``: the
+    dictionary size at the finest scale (reduced where a scale has fewer than ``2 N``
+    patches, as :func:`texsyn.models.sparse.learn_sparse_model` does).
+    """
+    tau, s = patch_size, sparsity
+    dim = tau * tau * c
+    big = 2 ** (scales - 1)
+    hc, wc = (h // big) * big, (w // big) * big
+    kept, peak = 8.0 * h * w * c, 0.0
+    atoms = []
+    for j in range(scales):
+        sh, sw = hc >> j, wc >> j
+        k = float(max(0, sh - tau + 1) * max(0, sw - tau + 1))
+        n = n_atoms if k >= 2 * n_atoms else max(s + 1, int(k) // 2)
+        atoms.append(n)
+        t = min(k, float(ksvd_training))
+        ksvd = 64.0 * t * n + 24.0 * dim * t
+        pursuit = 17.0 * n * k + 130.0 * k
+        peak = max(peak, kept + 8.0 * k * dim + max(8.0 * k * dim, ksvd, pursuit))
+        kept += 8.0 * dim * n + 8.0 * k + 16.0 * sh * sw * c * (j > 0) + 8.0 * sh * sw * c
+    return kept, peak, atoms[0]

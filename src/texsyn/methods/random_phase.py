@@ -1,20 +1,23 @@
-"""Random phase noise (Galerne, Gousseau, Morel 2011)."""
+"""Random phase noise (Galerne, Gousseau, Morel 2011).
+
+The exemplar's Fourier modulus is kept and its phase replaced by the phase of white noise:
+``fit`` takes the periodic component of the exemplar and removes its mean (the "spot"),
+``sample`` draws the random phase (:func:`random_phase_noise`). ``docs/methods/random_phase.md``
+maps the paper's steps to these functions.
+"""
 
 from __future__ import annotations
-
 
 import numpy as np
 
 from ..ops import as_channels, periodic_smooth_decomposition
 from ._base import TextureSynthesizer
-from ._memory import shape_dims, output_bytes, pixel_count
+from ._memory import output_bytes, pixel_count, shape_dims
 
 __all__ = ["RandomPhase", "random_phase_noise"]
 
 
-def random_phase_noise(
-    spot: np.ndarray, shape: tuple[int, int], rng: np.random.Generator
-) -> np.ndarray:
+def random_phase_noise(spot: np.ndarray, shape: tuple[int, int], rng: np.random.Generator) -> np.ndarray:
     """Randomise the Fourier phase of a zero-mean ``spot``, the same phase on every channel.
 
     Parameters
@@ -65,6 +68,13 @@ class RandomPhase(TextureSynthesizer):
     ----------
     B. Galerne, Y. Gousseau, J.-M. Morel, "Random phase textures: theory and synthesis",
     IEEE Trans. Image Processing 20 (2011), sections 3-4.
+
+    Examples
+    --------
+    >>> import texsyn
+    >>> method = RandomPhase().fit(texsyn.data.exemplar("gravel", size=32))
+    >>> method.sample((48, 40), rng=0).shape
+    (48, 40)
     """
 
     name = "random_phase"

@@ -1,17 +1,18 @@
-"""Constrained sparse texture synthesis (Tartavel, Gousseau, Peyre 2013).
+"""Constrained sparse texture synthesis (Tartavel, Gousseau, Peyré 2013).
 
 A dictionary of patch atoms is learned on the exemplar (K-SVD, S-sparse codes) together
-with how often each atom is used. Synthesis minimises, by block-coordinate descent from
-white noise, the energy (3) of the paper: sparse coding of the patches of the image on a
-periodic grid, each atom used at most as often as in the exemplar (constrained matching
-pursuit), the Wasserstein distance to the exemplar's histogram, and a low-pass term; the
-linear patch averaging is replaced by graph-cut stitching, and a coarse-to-fine loop over
-``J`` scales gives large-scale coherence.
+with how often each atom is used (:mod:`texsyn.models.sparse`). Synthesis minimises, by
+block-coordinate descent from white noise, the energy (3) of the paper: sparse coding of the
+patches of the image on a periodic grid, each atom used at most as often as in the exemplar
+(constrained matching pursuit), the Wasserstein distance to the exemplar's histogram, and a
+low-pass term; the linear patch averaging is replaced by graph-cut stitching, and a
+coarse-to-fine loop over ``J`` scales gives large-scale coherence. The paper's steps, the
+functions that implement them and our resolutions of its open points are in
+``docs/methods/sparse.md``.
 
 References
 ----------
-G. Tartavel, Y. Gousseau, G. Peyre, "Constrained sparse texture synthesis", SSVM 2013.
-Implementation notes and resolutions of the paper's ambiguities: spec 04 (A1-A20).
+G. Tartavel, Y. Gousseau, G. Peyré, "Constrained sparse texture synthesis", SSVM 2013.
 """
 
 from __future__ import annotations
@@ -22,112 +23,27 @@ import warnings
 from typing import Annotated
 
 import numpy as np
-from scipy import ndimage
 
 from .._validation import OneOf, Range
-from ..ops import (
-    ColorPCA,
-    HistogramMatcher,
-    as_channels,
-    average_patches,
-    crop_to_multiple,
-    extract_patches,
-    zoom_out,
-)
-from ..ops.graphcut import graphcut_reassemble
-from ..ops.sparse import constrained_matching_pursuit, ksvd
-from ._base import Progress, TextureSynthesizer
-from ._memory import shape_dims, output_bytes, pixel_count
 from ..errors import InputError
+from ..models.sparse import SparseScale, learn_sparse_model, sparse_model_from_arrays
+from ..ops.graphcut import graphcut_reassemble
+from ..ops.histogram import HistogramMatcher
 from ..ops.linalg import matmul
+from ..ops.patches import average_patches, extract_patches
+from ..ops.progress import Reporter
+from ..ops.sparse import box_power, constrained_matching_pursuit, image_energy, image_update, upsample_bicubic
+from ._base import TextureSynthesizer
+from ._memory import output_bytes, pixel_count, shape_dims, sparse_fit_bytes
 
-__all__ = ["ConstrainedSparse", "MODES", "upsample_bicubic"]
+__all__ = ["ConstrainedSparse", "MODES", "image_energy", "image_update", "upsample_bicubic"]
 
 #: the step-by-step study of the paper's Fig. 4, each mode adding one ingredient
 MODES = ("basic", "frequency", "graphcut", "multiscale", "full")
-#: fitted-state format written by :meth:`ConstrainedSparse.fitted_state`
+#: version of the in-memory state of :meth:`ConstrainedSparse.fitted_state` (texsyn 0.1's file format)
 FORMAT_VERSION = 1
-#: parameters that change what ``fit`` learns (a loaded state cannot change them)
-LEARNED = ("patch_size", "step", "n_scales", "sparsity", "n_atoms", "ksvd_iterations", "ksvd_training", "random_state")
-
-
-def upsample_bicubic(image: np.ndarray) -> np.ndarray:
-    """Periodic cubic-spline up-sampling by 2 aligned with ``S_2`` (spec 00, 4.3).
-
-    Fine pixel ``j`` sits at coarse coordinate ``j / 2``, so ``up[::2, ::2] == image``.
-    """
-    img = as_channels(np.asarray(image, dtype=np.float64))
-    h, w, channels = img.shape
-    ii, jj = np.meshgrid(np.arange(2 * h) / 2.0, np.arange(2 * w) / 2.0, indexing="ij")
-    out = np.empty((2 * h, 2 * w, channels))
-    for c in range(channels):
-        out[..., c] = ndimage.map_coordinates(img[..., c], [ii, jj], order=3, mode="grid-wrap")
-    return out
-
-
-def _box_power(shape: tuple[int, int], tau: int) -> np.ndarray:
-    """``|h_hat|^2`` of the normalised ``tau x tau`` box on a periodic canvas."""
-    box = np.zeros(shape)
-    box[:tau, :tau] = 1.0 / tau**2
-    return np.abs(np.fft.rfft2(box)) ** 2
-
-
-def _lowpass_apply(e: np.ndarray, power: np.ndarray) -> np.ndarray:
-    """``h_bar * h * e`` per channel (periodic)."""
-    spec = np.fft.rfft2(e, axes=(0, 1)) * power[..., None]
-    return np.fft.irfft2(spec, s=e.shape[:2], axes=(0, 1))
-
-
-def image_update(
-    u: np.ndarray,
-    recon: np.ndarray,
-    projector: HistogramMatcher,
-    *,
-    alpha: float,
-    beta: float,
-    box_power: np.ndarray,
-    reference: np.ndarray,
-    n_steps: int,
-    rng: np.random.Generator | None,
-) -> np.ndarray:
-    """Gradient steps on the energy (6) for fixed codes (Tartavel et al. 2013, eq. 7).
-
-    ``g = 2 (u - R) + 2 alpha (u - T_hist(u)) + 2 beta h_bar * h * (u - u_ref)`` with step
-    ``eta = 1 / (2 (1 + alpha + beta))``, half the inverse Lipschitz constant (spec 04, A6).
-    """
-    eta = 1.0 / (2.0 * (1.0 + alpha + beta))
-    for _ in range(n_steps):
-        grad = 2.0 * (u - recon) + 2.0 * alpha * (u - projector(u, rng))
-        if beta > 0:
-            grad += 2.0 * beta * _lowpass_apply(u - reference, box_power)
-        u = u - eta * grad
-    return u
-
-
-def image_energy(
-    u: np.ndarray,
-    coded: np.ndarray,
-    tau: int,
-    step: int,
-    projector: HistogramMatcher,
-    *,
-    alpha: float,
-    beta: float,
-    box_power: np.ndarray,
-    reference: np.ndarray,
-) -> float:
-    """``E_W(u) = (1/Z)||Pi(u) - D W||^2 + alpha N W_2^2 + beta ||h * (u - u_ref)||^2`` (eq. 6)."""
-    patches, _ = extract_patches(u, tau, stride=step, mode="periodic")
-    z = (tau / step) ** 2
-    data = np.sum((patches - coded) ** 2) / z
-    hist = np.sum((u - projector(u, None)) ** 2)
-    low = 0.0
-    if beta > 0:
-        filtered = np.fft.irfft2(
-            np.fft.rfft2(u - reference, axes=(0, 1)) * np.sqrt(box_power)[..., None], s=u.shape[:2], axes=(0, 1)
-        )
-        low = np.sum(filtered**2)
-    return float(data + alpha * hist + beta * low)
+#: parameters that change what ``fit`` learns (a loaded dictionary cannot change them)
+LEARNED = ("patch_size", "step", "n_scales", "sparsity", "n_atoms", "ksvd_iterations", "ksvd_training", "fit_rng")
 
 
 class ConstrainedSparse(TextureSynthesizer):
@@ -177,8 +93,9 @@ class ConstrainedSparse(TextureSynthesizer):
         Training patches drawn per K-SVD iteration.
     tolerance : float
         Stop a scale early when the relative change of the image falls below this.
-    random_state : int
-        Seed of the randomness of fit (K-SVD initialisation and subsets).
+    fit_rng : int
+        Seed of the randomness of fit (K-SVD initialisation and subsets); ``sample`` takes
+        its own ``rng``. Formerly ``random_state`` (deprecated).
 
     References
     ----------
@@ -188,13 +105,28 @@ class ConstrainedSparse(TextureSynthesizer):
     Notes
     -----
     Limitations (paper, Fig. 3): very large-scale structures and noise-like micro-textures
-    are poorly reproduced by the sparse model.
+    are poorly reproduced by the sparse model. ``fit`` is the expensive part (K-SVD at every
+    scale): :func:`texsyn.save` stores the learned dictionaries, and :func:`texsyn.load`
+    may change the sampling parameters of a saved model (``docs/persistence.md``).
+
+    Examples
+    --------
+    >>> import texsyn
+    >>> ex = texsyn.data.exemplar("brick", size=24)
+    >>> method = ConstrainedSparse(patch_size=6, step=3, n_scales=1, n_atoms=16,
+    ...                            ksvd_iterations=1, n_outer=1, n_inner=1).fit(ex)
+    >>> method.model_.scales[0].dictionary.shape
+    (36, 16)
+    >>> method.sample((12, 12), rng=0).shape
+    (12, 12)
     """
 
     name = "sparse"
     summary = "Constrained sparse synthesis: learned dictionary, atom frequencies, graph cuts"
     reference = "Tartavel, Gousseau, Peyre, SSVM 2013"
     has_source_map = False
+    deprecated_params = {"random_state": "fit_rng"}
+    learned_params = LEARNED
 
     def __init__(
         self,
@@ -215,7 +147,7 @@ class ConstrainedSparse(TextureSynthesizer):
         ksvd_iterations: Annotated[int, Range(1, 1000)] = 20,
         ksvd_training: Annotated[int, Range(10, 10**7)] = 8000,
         tolerance: Annotated[float, Range(0.0, 1.0)] = 1e-4,
-        random_state: Annotated[int, Range(0, 2**32 - 1)] = 0,
+        fit_rng: Annotated[int, Range(0, 2**32 - 1)] = 0,
     ):
         self.patch_size = patch_size
         self.step = step
@@ -233,7 +165,7 @@ class ConstrainedSparse(TextureSynthesizer):
         self.ksvd_iterations = ksvd_iterations
         self.ksvd_training = ksvd_training
         self.tolerance = tolerance
-        self.random_state = random_state
+        self.fit_rng = fit_rng
 
     # ---------------------------------------------------------------- configuration
     @property
@@ -256,9 +188,7 @@ class ConstrainedSparse(TextureSynthesizer):
         super()._check_params()
         tau, step = self.patch_size, self.step
         if step > tau or tau % step:
-            raise InputError(
-                f"parameter 'step' of method 'sparse' must divide patch_size={tau}, got {step}"
-            )
+            raise InputError(f"parameter 'step' of method 'sparse' must divide patch_size={tau}, got {step}")
         if self._graphcut and 2 * step < tau:
             raise InputError(
                 f"parameter 'step' of method 'sparse' must be at least patch_size/2={tau / 2:g} "
@@ -271,61 +201,30 @@ class ConstrainedSparse(TextureSynthesizer):
 
     def min_exemplar_size(self):
         side = self.patch_size * 2 ** (self._scales - 1)
-        return side, f"patch_size={self.patch_size} with {self._scales} scale(s) needs at least {side}x{side} pixels"
+        return (
+            side,
+            f"patch_size={self.patch_size} with {self._scales} scale(s) needs at least {side}x{side} pixels",
+        )
 
     # ---------------------------------------------------------------- fit
     def _fit(self, exemplar: np.ndarray) -> None:
-        timings = {"dictionary": 0.0, "exemplar_codes": 0.0}
-        ex = crop_to_multiple(as_channels(exemplar), 2 ** (self._scales - 1))
-        rng = np.random.default_rng(self.random_state)
-        tau, s = self.patch_size, self.sparsity
-        scales = []
-        image = ex
-        for j in range(self._scales):
-            if j > 0:
-                image = zoom_out(image, 1.0)
-            patches, _ = extract_patches(image, tau)
-            n_patches = patches.shape[0]
-            if n_patches < 2 * (s + 1):
-                raise InputError(
-                    f"exemplar {ex.shape[1]}x{ex.shape[0]} gives {n_patches} patches of side "
-                    f"patch_size={tau} at scale {j} (n_scales={self._scales}); need at least "
-                    f"{2 * (s + 1)}: use fewer scales, smaller patches or a larger exemplar"
-                )
-            n_atoms = self.n_atoms
-            if n_patches < 2 * n_atoms:
-                n_atoms = max(s + 1, n_patches // 2)
-                warnings.warn(
-                    f"scale {j} has only {n_patches} exemplar patches; using {n_atoms} atoms "
-                    f"instead of n_atoms={self.n_atoms}",
-                    UserWarning,
-                    stacklevel=3,
-                )
-            start = time.perf_counter()
-            dictionary = ksvd(
-                patches.T, n_atoms, s, n_iterations=self.ksvd_iterations, max_training=self.ksvd_training, rng=rng
-            )
-            timings["dictionary"] += time.perf_counter() - start
-            start = time.perf_counter()
-            codes = constrained_matching_pursuit(patches.T, dictionary, s, None)
-            timings["exemplar_codes"] += time.perf_counter() - start
-            usage = np.count_nonzero(codes, axis=1)
-            pca = ColorPCA(image) if image.shape[2] > 1 else None
-            coords = pca.forward(image) if pca is not None else image
-            scales.append(
-                {
-                    "dictionary": dictionary,
-                    "usage": usage,
-                    "n_patches": n_patches,
-                    "sorted": [np.sort(coords[..., c], axis=None) for c in range(image.shape[2])],
-                    "pca": pca,
-                    "mean": image.mean(axis=(0, 1)),
-                    "std": image.std(axis=(0, 1)),
-                    "image": image,
-                }
-            )
-        self.scales_ = scales
-        self.fit_seconds_ = timings
+        model, seconds = learn_sparse_model(
+            exemplar,
+            n_scales=self._scales,
+            patch_size=self.patch_size,
+            sparsity=self.sparsity,
+            n_atoms=self.n_atoms,
+            ksvd_iterations=self.ksvd_iterations,
+            ksvd_training=self.ksvd_training,
+            seed=self.fit_rng,
+        )
+        self.model_ = model
+        self.fit_seconds_ = seconds
+
+    @property
+    def scales_(self) -> tuple[SparseScale, ...]:
+        """The learned scales, finest first (``model_.scales``; texsyn 0.1's name)."""
+        return self.model_.scales
 
     # ---------------------------------------------------------------- memory
     def memory_terms(self, exemplar_shape, output_shape=None) -> dict[str, float]:
@@ -337,29 +236,17 @@ class ConstrainedSparse(TextureSynthesizer):
         the output patches and the graph-cut reassembly (``docs/memory.md``).
         """
         h, w, c = shape_dims(exemplar_shape)
-        tau, s = self.patch_size, self.sparsity
-        dim = tau * tau * c
-        big = 2 ** (self._scales - 1)
-        hc, wc = (h // big) * big, (w // big) * big
-        kept, fit_peak = 8.0 * h * w * c, 0.0
-        atoms = []
-        for j in range(self._scales):
-            sh, sw = hc >> j, wc >> j
-            k = float(max(0, sh - tau + 1) * max(0, sw - tau + 1))
-            n = self.n_atoms if k >= 2 * self.n_atoms else max(s + 1, int(k) // 2)
-            atoms.append(n)
-            t = min(k, float(self.ksvd_training))
-            ksvd = 64.0 * t * n + 24.0 * dim * t
-            pursuit = 17.0 * n * k + 130.0 * k
-            fit_peak = max(fit_peak, kept + 8.0 * k * dim + max(8.0 * k * dim, ksvd, pursuit))
-            kept += 8.0 * dim * n + 8.0 * k + 16.0 * sh * sw * c * (j > 0) + 8.0 * sh * sw * c
+        dim = self.patch_size * self.patch_size * c
+        kept, fit_peak, n = sparse_fit_bytes(
+            h, w, c, scales=self._scales, patch_size=self.patch_size, sparsity=self.sparsity,
+            n_atoms=self.n_atoms, ksvd_training=self.ksvd_training,
+        )  # fmt: skip
         terms = {"exemplar scales and dictionaries": kept}
         if output_shape is None:
             terms["patches, K-SVD and codes of the exemplar"] = fit_peak - kept
             return terms
         canvas = self._canvas(output_shape)
         pixels = float(canvas[0]) * canvas[1]
-        n = atoms[0]
         patches = pixels / (self.step * self.step)
         terms["image, gradient and histogram targets"] = pixels * (56.0 * c + 16.0) + 8.0 * n * n
         pursuit = 8.0 * patches * dim + 17.0 * n * patches + 130.0 * patches
@@ -375,37 +262,42 @@ class ConstrainedSparse(TextureSynthesizer):
         return (q * max(-(-shape[0] // q), least), q * max(-(-shape[1] // q), least))
 
     def _sample(self, shape, rng, callback):
+        """Algorithm 1, steps 3-4, from the coarsest scale to the finest (section 4.3)."""
         tau, step, s = self.patch_size, self.step, self.sparsity
         canvas = self._canvas(shape)
         seconds = {"coding": 0.0, "reconstruction": 0.0, "image_update": 0.0}
         u = None
         for j in reversed(range(self._scales)):
-            scale = self.scales_[j]
+            scale = self.model_.scales[j]
+            report = Reporter(callback, f"scale {self._scales - j}/{self._scales}", self.n_outer)
             size = (canvas[0] >> j, canvas[1] >> j)
             grid = (size[0] // step, size[1] // step)
             n_patches = grid[0] * grid[1]
             budget = None
-            if self._frequency:
-                budget = np.ceil(n_patches / scale["n_patches"] * scale["usage"]).astype(np.int64)
-            if u is None:
-                u = scale["mean"] + scale["std"] * rng.standard_normal(size + (len(scale["mean"]),))
+            if self._frequency:  # the frequencies F of eq. (4), rounded up
+                budget = np.ceil(n_patches / scale.n_patches * scale.usage).astype(np.int64)
+            if u is None:  # white noise with the exemplar's mean and deviation
+                u = scale.mean + scale.std * rng.standard_normal(size + (len(scale.mean),))
             else:
                 u = upsample_bicubic(u)
             reference = self._reference(scale, size)
-            projector = HistogramMatcher(scale["sorted"], size[0] * size[1], pca=scale["pca"])
-            power = _box_power(size, tau)
-            dictionary = scale["dictionary"]
+            projector = HistogramMatcher(scale.sorted, size[0] * size[1], pca=scale.pca)
+            # the weights and targets of the energy (6) at this scale
+            power = box_power(size, tau)
+            energy = dict(alpha=self.alpha, beta=self._beta, box_power=power, reference=reference)
+            dictionary = scale.dictionary
             gram = dictionary.T @ dictionary
             for outer in range(self.n_outer):
                 offset = rng.integers(step, size=2) if self.random_offset else np.zeros(2, dtype=int)
                 shifted = np.roll(u, (-offset[0], -offset[1]), axis=(0, 1))
                 clock = time.perf_counter()
+                # coefficient update (section 4.2)
                 patches, anchors = extract_patches(shifted, tau, stride=step, mode="periodic")
                 codes = constrained_matching_pursuit(patches.T, dictionary, s, budget, gram=gram)
                 coded = matmul(dictionary, codes).T
                 seconds["coding"] += time.perf_counter() - clock
                 clock = time.perf_counter()
-                if self._graphcut:
+                if self._graphcut:  # the non-linear reconstruction of section 4.1
                     recon = graphcut_reassemble(coded.reshape(grid + (tau, tau, u.shape[2])), step, size)
                 else:
                     recon = average_patches(coded, anchors, size + (u.shape[2],), tau, mode="periodic")
@@ -413,13 +305,10 @@ class ConstrainedSparse(TextureSynthesizer):
                 seconds["reconstruction"] += time.perf_counter() - clock
                 clock = time.perf_counter()
                 previous = u
-                u = image_update(
-                    u, recon, projector, alpha=self.alpha, beta=self._beta, box_power=power,
-                    reference=reference, n_steps=self.n_inner, rng=rng,
-                )
+                u = image_update(u, recon, projector, n_steps=self.n_inner, rng=rng, **energy)  # section 4.1
                 seconds["image_update"] += time.perf_counter() - clock
                 change = np.linalg.norm(u - previous) / max(np.linalg.norm(u), 1e-12)
-                if callback is not None:
+                if report.active:
                     info = {
                         "scale": j,
                         "n_patches": n_patches,
@@ -428,16 +317,18 @@ class ConstrainedSparse(TextureSynthesizer):
                         "relative_change": change,
                         "seconds": dict(seconds),
                     }
-                    callback(Progress(f"scale {self._scales - j}/{self._scales}", outer + 1, self.n_outer, info=info))
+                    report(outer + 1, info=info)
                 if change < self.tolerance:
                     break
         out = u[: shape[0], : shape[1]]
         if self.final_histogram:
-            out = HistogramMatcher(self.scales_[0]["sorted"], out.shape[0] * out.shape[1], pca=self.scales_[0]["pca"])(out, rng)
+            finest = self.model_.scales[0]
+            out = HistogramMatcher(finest.sorted, out.shape[0] * out.shape[1], pca=finest.pca)(out, rng)
         return out, None
 
-    def _reference(self, scale: dict, size: tuple[int, int]) -> np.ndarray:
-        image = scale["image"]
+    def _reference(self, scale: SparseScale, size: tuple[int, int]) -> np.ndarray:
+        """``u_ref`` of the low-pass term: the exemplar's mean colour, or the exemplar itself."""
+        image = scale.image
         if self.lowpass_ref == "aligned":
             if image.shape[0] >= size[0] and image.shape[1] >= size[1]:
                 return image[: size[0], : size[1]]
@@ -446,38 +337,53 @@ class ConstrainedSparse(TextureSynthesizer):
                 UserWarning,
                 stacklevel=4,
             )
-        return np.broadcast_to(scale["mean"], size + (image.shape[2],))
+        return np.broadcast_to(scale.mean, size + (image.shape[2],))
 
     # ---------------------------------------------------------------- persistence
-    def fitted_state(self) -> dict[str, np.ndarray]:
-        """Everything ``fit`` learned, as plain arrays (for :func:`texsyn.io.save_fitted`)."""
+    def fitted_arrays(self) -> dict[str, np.ndarray]:
+        """The learned dictionaries and statistics of every scale (:meth:`SparseModel.to_arrays`)."""
         self._require_fitted()
-        state: dict[str, np.ndarray] = {
+        return self.model_.to_arrays()
+
+    def restore_fitted(self, exemplar: np.ndarray, arrays: dict[str, np.ndarray]) -> ConstrainedSparse:
+        """Rebuild the saved model without running K-SVD again (``docs/persistence.md``)."""
+        self._check_params()
+        model = sparse_model_from_arrays(arrays)
+        if self._scales > len(model.scales):
+            raise InputError(
+                f"mode {self.mode!r} needs {self._scales} scales but the saved model has {len(model.scales)}; "
+                "save a model fitted in mode 'multiscale' or 'full'"
+            )
+        self.exemplar_ = np.asarray(exemplar, dtype=np.float64)
+        self.model_ = model
+        return self
+
+    def fitted_state(self) -> dict[str, np.ndarray]:
+        """The fitted model as plain arrays with the parameters, in memory (texsyn 0.1's format 1).
+
+        For sampling one dictionary in several modes (:meth:`from_fitted_state`); files: :func:`texsyn.save`.
+        """
+        self._require_fitted()
+        return {
             "format_version": np.array(FORMAT_VERSION),
             "method": np.array(self.name),
             "params": np.array(json.dumps(self.get_params())),
             "exemplar": self.exemplar_,
-            "n_scales_fitted": np.array(len(self.scales_)),
+            **self.model_.to_arrays(),
         }
-        for j, sc in enumerate(self.scales_):
-            state[f"s{j}_dictionary"] = sc["dictionary"]
-            state[f"s{j}_usage"] = sc["usage"]
-            state[f"s{j}_n_patches"] = np.array(sc["n_patches"])
-            state[f"s{j}_sorted"] = np.stack(sc["sorted"])
-            state[f"s{j}_mean"] = sc["mean"]
-            state[f"s{j}_std"] = sc["std"]
-            state[f"s{j}_image"] = sc["image"]
-        return state
 
     @classmethod
-    def from_fitted_state(cls, state, **params) -> "ConstrainedSparse":
+    def from_fitted_state(cls, state, **params) -> ConstrainedSparse:
         """Rebuild a fitted instance; ``params`` may change sampling parameters only."""
         version = int(np.asarray(state["format_version"]))
         if version != FORMAT_VERSION:
             raise InputError(f"fitted state has format_version {version}; this texsyn reads {FORMAT_VERSION}")
-        if str(np.asarray(state["method"])) != cls.name:
-            raise InputError(f"fitted state is for method {str(np.asarray(state['method']))!r}, not {cls.name!r}")
-        saved = json.loads(str(np.asarray(state["params"])))
+        if (method := str(np.asarray(state["method"]))) != cls.name:
+            raise InputError(f"fitted state is for method {method!r}, not {cls.name!r}")
+        with warnings.catch_warnings():  # a state of texsyn 0.1 names the seed random_state
+            warnings.simplefilter("ignore", DeprecationWarning)
+            saved = cls.canonical_params(json.loads(str(np.asarray(state["params"]))))
+        params = cls.canonical_params(params, stacklevel=2)
         changed = sorted(k for k in params if k in LEARNED and params[k] != saved.get(k))
         if changed:
             raise InputError(
@@ -486,29 +392,6 @@ class ConstrainedSparse(TextureSynthesizer):
         unknown = sorted(set(params) - set(cls.param_specs()))
         if unknown:
             raise InputError(f"unknown parameter {unknown[0]!r} for method {cls.name!r}")
-        method = cls(**{**saved, **params})
-        method._check_params()
-        fitted = int(np.asarray(state["n_scales_fitted"]))
-        if method._scales > fitted:
-            raise InputError(
-                f"mode {method.mode!r} needs {method._scales} scales but the saved state has {fitted}; "
-                "save a model fitted in mode 'multiscale' or 'full'"
-            )
-        method.exemplar_ = np.asarray(state["exemplar"], dtype=np.float64)
-        scales = []
-        for j in range(int(np.asarray(state["n_scales_fitted"]))):
-            image = np.asarray(state[f"s{j}_image"], dtype=np.float64)
-            scales.append(
-                {
-                    "dictionary": np.asarray(state[f"s{j}_dictionary"], dtype=np.float64),
-                    "usage": np.asarray(state[f"s{j}_usage"], dtype=np.int64),
-                    "n_patches": int(np.asarray(state[f"s{j}_n_patches"])),
-                    "sorted": list(np.asarray(state[f"s{j}_sorted"], dtype=np.float64)),
-                    "pca": ColorPCA(image) if image.shape[2] > 1 else None,
-                    "mean": np.asarray(state[f"s{j}_mean"], dtype=np.float64),
-                    "std": np.asarray(state[f"s{j}_std"], dtype=np.float64),
-                    "image": image,
-                }
-            )
-        method.scales_ = scales
-        return method
+        header = ("format_version", "method", "params", "exemplar")
+        arrays = {k: v for k, v in state.items() if k not in header}
+        return cls(**{**saved, **params}).restore_fitted(state["exemplar"], arrays)
