@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+
 from .errors import InputError
 
 __all__ = ["BUILTIN", "exemplar"]
@@ -34,4 +35,4 @@ def exemplar(name: str = "brick", *, size: int | None = 128) -> np.ndarray:
         if not 2 <= size <= min(image.shape[:2]):
             raise InputError(f"size must be in [2, {min(image.shape[:2])}], got {size}")
         image = image[:size, :size]
-    return (image.astype(np.float32) / 255.0)
+    return image.astype(np.float32) / 255.0

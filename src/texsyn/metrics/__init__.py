@@ -7,6 +7,7 @@ any sizes).
 
 from __future__ import annotations
 
+from ..ops.linalg import fixed_order
 from .patches import (
     PATCH_SIZE,
     CopyMap,
@@ -19,7 +20,6 @@ from .patches import (
     source_map_regions,
     synthesis_map,
 )
-from ..ops.linalg import fixed_order
 from .statistics import ps_distance, ps_statistics
 from .texture import (
     histogram_distance,

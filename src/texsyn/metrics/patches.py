@@ -1,8 +1,9 @@
 """Patch-based metrics: coherence, completeness, verbatim copies and synthesis maps.
 
 All of them rest on one exact nearest-patch field between the synthesised image and the
-exemplar (every ``n x n`` patch of each against every patch of the other, spec 00, 2.2),
-computed once by :func:`nearest_patch_field` and shared.
+exemplar (every ``n x n`` patch of each against every patch of the other, by matrix
+products: :func:`texsyn.ops.nearest_both_ways`, ``docs/determinism.md``), computed once by
+:func:`nearest_patch_field` and shared.
 """
 
 from __future__ import annotations
@@ -72,9 +73,7 @@ def nearest_patch_field(image, exemplar, *, patch_size: int = PATCH_SIZE) -> Nea
     img, ex = check_pair(image, exemplar)
     n = int(patch_size)
     if n < 1 or n > min(img.shape[0], img.shape[1], ex.shape[0], ex.shape[1]):
-        raise ValueError(
-            f"patch_size must be between 1 and the smallest image side, got {patch_size}"
-        )
+        raise ValueError(f"patch_size must be between 1 and the smallest image side, got {patch_size}")
     q, q_anchor = extract_patches(img, n)
     b, b_anchor = extract_patches(ex, n)
     q_idx, q_dist, b_idx, b_dist = nearest_both_ways(q, b)
@@ -180,7 +179,7 @@ def copy_map(
     f = _field(image, exemplar, patch_size, field)
     n = f.patch_size
     ha, wa = f.distance.shape
-    anchors = np.stack(np.mgrid[:ha, :wa], axis=-1)
+    anchors = np.stack(list(np.mgrid[:ha, :wa]), axis=-1)
     offsets = f.source - anchors
     copied = f.distance <= tolerance
     labels = _constant_offset_regions(offsets, copied)
@@ -232,7 +231,7 @@ def source_map_regions(source_map: np.ndarray) -> tuple[np.ndarray, float]:
     """
     src = np.asarray(source_map)
     h, w = src.shape[:2]
-    offsets = src - np.stack(np.mgrid[:h, :w], axis=-1)
+    offsets = src - np.stack(list(np.mgrid[:h, :w]), axis=-1)
     labels = _constant_offset_regions(offsets, np.ones((h, w), dtype=bool))
     return labels, float(np.bincount(labels.ravel()).max() / (h * w))
 
@@ -273,7 +272,7 @@ def synthesis_map(
     """
     img, ex = check_pair(image, exemplar)
     h0, w0 = ex.shape[:2]
-    grid = np.stack(np.mgrid[:h0, :w0], axis=-1)
+    grid = np.stack(list(np.mgrid[:h0, :w0]), axis=-1)
     if source_map is None:
         f = _field(img, ex, patch_size, field)
         ha, wa = f.distance.shape

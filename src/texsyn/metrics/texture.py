@@ -37,14 +37,13 @@ def histogram_distance(image, exemplar) -> float:
     """Quadratic Wasserstein distance between the pixel histograms, averaged over channels.
 
     For each channel, ``W_2 = (int_0^1 (Q_x(t) - Q_y(t))^2 dt)^(1/2)`` with ``Q`` the step
-    quantile functions, which is exact for unequal pixel counts (spec 00, 5.2). In the units
-    of the pixel values (0 = same histogram).
+    quantile functions: the one-dimensional optimal transport between the two sets of values,
+    exact for unequal pixel counts (:func:`texsyn.ops.transport_energy`). In the units of the
+    pixel values (0 = same histogram).
     """
     img, ex = check_pair(image, exemplar)
     n = img.shape[0] * img.shape[1]
-    per_channel = [
-        np.sqrt(transport_energy(img[..., c], ex[..., c]) / n) for c in range(img.shape[2])
-    ]
+    per_channel = [np.sqrt(transport_energy(img[..., c], ex[..., c]) / n) for c in range(img.shape[2])]
     return float(np.mean(per_channel))
 
 

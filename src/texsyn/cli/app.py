@@ -1,0 +1,218 @@
+"""The ``texsyn`` command line: the group, the entry point, exit statuses and messages.
+
+Exit status (``docs/errors.md``):
+
+- 0: success.
+- 1: a failure that is not the user's mistake: an output could not be written (disk full,
+  permission denied), the machine ran out of memory, a system error, or an internal error
+  (a bug: one line, ``--debug`` shows the traceback).
+- 2: bad input: a usage error or any :class:`texsyn.errors.InputError` (missing or
+  unreadable file, bad size or value, unknown method or parameter, output that exists,
+  names an input, or lies in a missing or read-only folder, work too large for memory).
+- 130: interrupted (SIGINT, Ctrl-C); 143: terminated (SIGTERM).
+
+Every error prints one line ``texsyn: error: ...`` on stderr, every warning one line
+``texsyn: warning: ...`` (a deprecated parameter name among them). Outputs are written all
+or none through :class:`texsyn.io.OutputSet`: nothing is created or replaced on any failure.
+
+This module holds the ``texsyn`` group, the entry point and the mapping of every outcome to
+one line and an exit status; the commands are in :mod:`~texsyn.cli.synthesis`,
+:mod:`~texsyn.cli.comparison` and :mod:`~texsyn.cli.listing`.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import threading
+import traceback
+import warnings
+from typing import Any
+
+import click
+
+from .._version import __version__
+from ..errors import InputError, OutputWriteError
+from .common import State
+
+__all__ = [
+    "EXIT_BAD_INPUT",
+    "EXIT_FAILURE",
+    "EXIT_INTERRUPTED",
+    "EXIT_OK",
+    "EXIT_TERMINATED",
+    "Terminated",
+    "cli",
+    "main",
+    "report_error",
+]
+
+EXIT_OK = 0
+EXIT_FAILURE = 1
+EXIT_BAD_INPUT = 2
+EXIT_INTERRUPTED = 130  # 128 + SIGINT
+EXIT_TERMINATED = 143  # 128 + SIGTERM
+
+
+class Terminated(BaseException):
+    """SIGTERM arrived. Raised in the main thread (like ``KeyboardInterrupt`` for SIGINT) so
+    that every ``finally``/``except BaseException`` cleanup runs and no temporary is left."""
+
+
+# ---------------------------------------------------------------------------- the group
+def _set_debug(ctx: click.Context, param, value: bool) -> None:
+    if value:
+        ctx.ensure_object(State).debug = True
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.option(
+    "--debug",
+    is_flag=True,
+    is_eager=True,
+    expose_value=False,
+    callback=_set_debug,
+    help="Print the full traceback of an error (also TEXSYN_DEBUG=1).",
+)
+@click.version_option(__version__, "--version", prog_name="texsyn", message="%(prog)s %(version)s")
+def cli() -> None:
+    """Exemplar-based texture synthesis.
+
+    Outputs are written all or none; an existing file is kept unless --overwrite, and an
+    output never replaces an input. Each command also writes a JSON sidecar
+    (OUTPUT.json: method, parameters, seed, inputs, version, command line).
+
+    \b
+    Exit status: 0 done; 1 failure that is not your input (write error, out of memory,
+    internal error); 2 bad input or usage; 130 interrupted; 143 terminated.
+    """
+
+
+# ---------------------------------------------------------------------------- entry point
+def _one_line(text: str, limit: int = 400) -> str:
+    text = " ".join(str(text).split())
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _describe_os_error(exc: OSError) -> str:
+    if exc.filename and exc.strerror:
+        return f"{exc.strerror}: '{exc.filename}'"
+    return str(exc) or type(exc).__name__
+
+
+def report_error(exc: BaseException, state: State) -> int:
+    """One line on stderr for ``exc`` (the traceback first with --debug); the exit status."""
+    if state.debug:
+        traceback.print_exception(exc, file=sys.stderr)
+
+    def say(line: str) -> None:
+        sys.stderr.write(line.rstrip() + "\n")
+        sys.stderr.flush()
+
+    if isinstance(exc, Terminated):
+        say("texsyn: terminated")
+        return EXIT_TERMINATED
+    if isinstance(exc, (KeyboardInterrupt, click.exceptions.Abort)):
+        say("texsyn: interrupted")
+        return EXIT_INTERRUPTED
+    if isinstance(exc, click.ClickException):
+        say(f"texsyn: error: {_one_line(exc.format_message())}")
+        return EXIT_BAD_INPUT
+    if isinstance(exc, InputError):
+        say(f"texsyn: error: {_one_line(str(exc) or type(exc).__name__)}")
+        return EXIT_BAD_INPUT
+    if isinstance(exc, OutputWriteError):
+        say(f"texsyn: error: {_one_line(str(exc))}")
+        return EXIT_FAILURE
+    if isinstance(exc, MemoryError):
+        say(
+            "texsyn: error: out of memory; request a smaller output or a smaller exemplar "
+            "(TEXSYN_MEMORY_LIMIT sets how much texsyn may plan to use)"
+        )
+        return EXIT_FAILURE
+    if isinstance(exc, OSError):
+        say(f"texsyn: error: {_one_line(_describe_os_error(exc))}")
+        return EXIT_FAILURE
+    if isinstance(exc, SystemExit):
+        return exc.code if isinstance(exc.code, int) else EXIT_FAILURE
+    hint = "" if state.debug else " (run with --debug for the traceback)"
+    say(f"texsyn: internal error: {type(exc).__name__}: {_one_line(str(exc), 300)}{hint}")
+    return EXIT_FAILURE
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None):
+    sys.stderr.write(f"texsyn: warning: {_one_line(message)}\n")
+
+
+def _install_signal_handlers():
+    """SIGINT -> KeyboardInterrupt, SIGTERM -> Terminated, once; return a function restoring the old handlers.
+
+    After the first signal both are ignored, so that a second one cannot interrupt the
+    removal of temporary files. Signals a parent asked to ignore stay ignored.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+    previous: dict[int, Any] = {}
+
+    def handler(signum, frame):
+        for sig in previous:
+            signal.signal(sig, signal.SIG_IGN)
+        if signum == signal.SIGTERM:
+            raise Terminated()
+        raise KeyboardInterrupt()
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        try:
+            old = signal.getsignal(sig)
+            if old is signal.SIG_IGN:
+                continue
+            signal.signal(sig, handler)
+            previous[sig] = old
+        except (ValueError, OSError):  # pragma: no cover - platforms without the signal
+            pass
+
+    def restore() -> None:
+        for sig, old in previous.items():
+            signal.signal(sig, old if old is not None else signal.SIG_DFL)
+
+    return restore
+
+
+def _env_flag(name: str) -> bool:
+    return os.environ.get(name, "").strip().lower() in ("1", "true", "yes", "on")
+
+
+def _run(args: list[str], state: State) -> int:
+    try:
+        if not args:
+            with click.Context(cli, info_name="texsyn") as ctx:
+                click.echo(cli.get_help(ctx))
+            return EXIT_OK
+        with cli.make_context("texsyn", list(args), obj=state) as ctx:
+            cli.invoke(ctx)
+        return EXIT_OK
+    except click.exceptions.Exit as exc:
+        return exc.exit_code
+    except BaseException as exc:
+        return report_error(exc, state)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``texsyn`` console script; returns the exit status."""
+    args = list(sys.argv[1:] if argv is None else argv)
+    state = State(debug=_env_flag("TEXSYN_DEBUG"), argv=[str(a) for a in args])
+    with warnings.catch_warnings():
+        warnings.showwarning = _show_warning
+        # texsyn's own deprecations (an old parameter name) reach the user as one line
+        warnings.filterwarnings("default", category=DeprecationWarning, module=r"texsyn(\.|$)")
+        restore = _install_signal_handlers()
+        try:
+            try:
+                return _run(state.argv, state)
+            except Terminated:  # arrived while reporting another error
+                return EXIT_TERMINATED
+            except KeyboardInterrupt:
+                return EXIT_INTERRUPTED
+        finally:
+            restore()
