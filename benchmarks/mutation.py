@@ -63,23 +63,23 @@ REPO = Path(__file__).resolve().parents[1]
 #: paper method -> (core modules under src/texsyn, its test files)
 GROUPS: dict[str, tuple[list[str], list[str]]] = {
     "patch_wavelet": (
-        ["ops/patch_wavelet.py", "methods/patch_wavelet.py"],
+        ["transforms/patch_wavelet.py", "models/patch_wavelet.py", "models/patch_embedding.py", "methods/patch_wavelet.py"],
         ["tests/test_patch_wavelet.py", "tests/test_strength_patch_wavelet.py"],
     ),
     "cwt": (
-        ["ops/dtcwt.py", "methods/wavelet_sampling.py"],
+        ["transforms/dtcwt.py", "drivers/coarse_to_fine.py", "methods/wavelet_sampling.py"],
         ["tests/test_ops_dtcwt.py", "tests/test_methods_wavelet.py", "tests/test_strength_classic.py"],
     ),
     "grouplets": (
-        ["ops/grouplets.py", "ops/flow.py", "ops/fluid.py", "methods/grouplets.py"],
+        ["transforms/grouplets.py", "models/grouplets.py", "ops/flow.py", "ops/fluid.py", "methods/grouplets.py"],
         ["tests/test_grouplets.py", "tests/test_strength_grouplets.py"],
     ),
     "sparse": (
-        ["ops/sparse.py", "methods/sparse.py"],
+        ["ops/sparse.py", "models/sparse.py", "methods/sparse.py"],
         ["tests/test_sparse.py", "tests/test_strength_classic.py"],
     ),
     "lg": (
-        ["ops/gaussian.py", "methods/gaussian.py"],
+        ["models/gaussian.py", "drivers/raster.py", "methods/single_scale_gaussian.py", "methods/gaussian.py", "methods/multiscale_gaussian.py"],
         ["tests/test_methods_gaussian.py", "tests/test_strength_gaussian.py"],
     ),
 }
