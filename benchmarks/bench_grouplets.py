@@ -24,16 +24,20 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _common import machine, parser
 
 import texsyn
-from _common import machine, parser
 from texsyn.io import read_image, write_frames, write_image
 from texsyn.metrics import histogram_distance
 from texsyn.ops import luma
 from texsyn.ops.flow import builtin_flow, structure_tensor_orientation
 from texsyn.ops.pyramids import LaplacianTightFrame
 
-STATIC_FILES = ["gh_tartavel_vistex/Bark-10.png", "gh_tartavel_vistex/Water-05.png", "gh_tartavel_vistex/Brick-02.png"]
+STATIC_FILES = [
+    "gh_tartavel_vistex/Bark-10.png",
+    "gh_tartavel_vistex/Water-05.png",
+    "gh_tartavel_vistex/Brick-02.png",
+]
 DYNAMIC_FILES = ["gh_tartavel_vistex/Bark-10.png", "gh_tartavel_vistex/Water-05.png"]
 
 
@@ -49,16 +53,19 @@ def main(argv: list[str] | None = None) -> int:
     lines = [
         "# Grouplets (Peyré 2008)",
         "",
-        machine() + " "
-        "Default parameters unless stated.",
+        machine() + " Default parameters unless stated.",
         "",
     ]
     warm = read_image(args.textures / STATIC_FILES[0])[:32, :32]
     list(texsyn.animate(warm, 2, (32, 32), rng=0, n_iterations=1))
 
     # ------------------------------------------------------------------ static timings
-    lines += ["## Static synthesis 128x128 -> 256x256 (target 10 s)", "",
-              "| exemplar | image | fit + sample (s) | histogram distance | image |", "|---|---|---:|---:|---|"]
+    lines += [
+        "## Static synthesis 128x128 -> 256x256 (target 10 s)",
+        "",
+        "| exemplar | image | fit + sample (s) | histogram distance | image |",
+        "|---|---|---:|---:|---|",
+    ]
     totals = {"colour": [], "grey": []}
     for name in STATIC_FILES:
         ex = read_image(args.textures / name)[:128, :128]
@@ -72,15 +79,26 @@ def main(argv: list[str] | None = None) -> int:
             totals[kind].append(total)
             file = f"grouplets_static_{Path(name).stem}_{kind}.png"
             write_image(args.images / file, out)
-            lines.append(f"| {Path(name).stem} | {kind} | {total:.2f} | {histogram_distance(out, image):.4f} | {file} |")
+            lines.append(
+                f"| {Path(name).stem} | {kind} | {total:.2f} | {histogram_distance(out, image):.4f} | {file} |"
+            )
             print(lines[-1], flush=True)
-    lines += ["", f"Median: colour **{statistics.median(totals['colour']):.2f} s**, grey **{statistics.median(totals['grey']):.2f} s** (target 10 s).", ""]
+    lines += [
+        "",
+        f"Median: colour **{statistics.median(totals['colour']):.2f} s**, grey **{statistics.median(totals['grey']):.2f} s** (target 10 s).",
+        "",
+    ]
 
     # ------------------------------------------------------------------ geometry follows the flow
-    lines += ["## Geometry follows a given flow", "",
-              "Static synthesis 256x256 along the flow; mean |cos| between the output's structure-tensor orientation "
-              "(sigma 5) and the flow over output pixels of coherence > 0.5 (target 0.9).", "",
-              "| exemplar (mean coherence) | flow | coherent pixels | mean abs cos | image |", "|---|---|---:|---:|---|"]
+    lines += [
+        "## Geometry follows a given flow",
+        "",
+        "Static synthesis 256x256 along the flow; mean |cos| between the output's structure-tensor orientation "
+        "(sigma 5) and the flow over output pixels of coherence > 0.5 (target 0.9).",
+        "",
+        "| exemplar (mean coherence) | flow | coherent pixels | mean abs cos | image |",
+        "|---|---|---:|---:|---|",
+    ]
     for name in ("gh_tartavel_vistex/Bark-10.png", "gh_tartavel_vistex/Brick-02.png"):
         ex = read_image(args.textures / name)[:128, :128]
         _, coh_in = structure_tensor_orientation(luma(ex))
@@ -94,14 +112,19 @@ def main(argv: list[str] | None = None) -> int:
             keep = coherence > 0.5
             file = f"grouplets_flow_{Path(name).stem}_{flow_name.replace(':', '')}.png"
             write_image(args.images / file, out)
-            lines.append(f"| {Path(name).stem} ({coh_in.mean():.2f}) | {flow_name} | {keep.mean():.2f} | {cos[keep].mean():.3f} | {file} |")
+            lines.append(
+                f"| {Path(name).stem} ({coh_in.mean():.2f}) | {flow_name} | {keep.mean():.2f} | {cos[keep].mean():.3f} | {file} |"
+            )
             print(lines[-1], flush=True)
     lines.append("")
 
     # ------------------------------------------------------------------ dynamic
-    lines += ["## Dynamic synthesis, 60 frames (targets: 30 s at 128x128, 2 min at 256x256)", "",
-              "| exemplar | size | time (s) | hist. distance frame 1 / 60 | band energies frame 1 | band energies frame 60 | largest band change | RMS speed 1 / 60 | video |",
-              "|---|---|---:|---|---|---|---:|---|---|"]
+    lines += [
+        "## Dynamic synthesis, 60 frames (targets: 30 s at 128x128, 2 min at 256x256)",
+        "",
+        "| exemplar | size | time (s) | hist. distance frame 1 / 60 | band energies frame 1 | band energies frame 60 | largest band change | RMS speed 1 / 60 | video |",
+        "|---|---|---:|---|---|---|---:|---|---|",
+    ]
     for name in DYNAMIC_FILES:
         ex = read_image(args.textures / name)[:128, :128]
         for size in (128, 256):

@@ -58,7 +58,9 @@ def main(argv: list[str] | None = None) -> int:
             out = texsyn.make_method(method).fit(ex).sample(rng=0)
             cm = copy_map(out, ex)
             cells.append(f"{cm.largest:.3f} / {cm.copied_share:.3f}")
-            print(f"{name:40s} {method:10s} largest {cm.largest:.3f}  copied {cm.copied_share:.3f}", flush=True)
+            print(
+                f"{name:40s} {method:10s} largest {cm.largest:.3f}  copied {cm.copied_share:.3f}", flush=True
+            )
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     args.out.write_text("\n".join(lines) + "\n")
     print(f"wrote {args.out}")

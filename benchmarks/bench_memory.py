@@ -205,7 +205,9 @@ def main(argv: list[str] | None = None) -> int:
 
     p = parser(__doc__.splitlines()[0], "memory.md", repeats=1)
     p.add_argument("--worker", help=argparse_suppress())
-    p.add_argument("--only", nargs="*", default=None, help="method names to run ('modify' for the modification)")
+    p.add_argument(
+        "--only", nargs="*", default=None, help="method names to run ('modify' for the modification)"
+    )
     p.add_argument("--quick", action="store_true", help="only the first configuration of each method")
     args = p.parse_args(argv)
     if args.worker:

@@ -83,13 +83,19 @@ def time_case(name: str, exemplar: np.ndarray, size: int, seed: int) -> tuple[fl
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--textures", type=Path, default=DEFAULT_TEXTURES)
-    parser.add_argument("--files", nargs="*", default=None, help="files inside --textures (default: three VisTex crops)")
+    parser.add_argument(
+        "--files", nargs="*", default=None, help="files inside --textures (default: three VisTex crops)"
+    )
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--methods", nargs="*", default=sorted(texsyn.METHODS))
     parser.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results.md")
     args = parser.parse_args(argv)
 
-    files = args.files if args.files is not None else (DEFAULT_FILES if args.textures == DEFAULT_TEXTURES else None)
+    files = (
+        args.files
+        if args.files is not None
+        else (DEFAULT_FILES if args.textures == DEFAULT_TEXTURES else None)
+    )
     exemplars = load_exemplars(args.textures, files)
     cases = [(m, kind, 256) for m in args.methods for kind in ("grey", "colour")]
     if "random_phase" in args.methods:
@@ -105,7 +111,7 @@ def main(argv: list[str] | None = None) -> int:
     for name, kind, size in cases:
         totals, samples = [], []
         repeats = args.repeats
-        for label, ex in exemplars:
+        for _label, ex in exemplars:
             image = ex if kind == "colour" else np.clip(rgb_to_yuv(ex)[..., 0], 0, 1)
             for r in range(repeats):
                 total, sample = time_case(name, image, size, seed=r)
@@ -116,8 +122,13 @@ def main(argv: list[str] | None = None) -> int:
         target = TARGETS.get((name, kind, size))
         median = statistics.median(totals)
         verdict = "" if target is None else ("yes" if median < target else "**no**")
-        rows.append((name, kind, f"128 -> {size}", median, statistics.median(samples), len(totals), target, verdict))
-        print(f"{name:15s} {kind:6s} {size:4d}  total {median:8.3f} s  sample {statistics.median(samples):8.3f} s", flush=True)
+        rows.append(
+            (name, kind, f"128 -> {size}", median, statistics.median(samples), len(totals), target, verdict)
+        )
+        print(
+            f"{name:15s} {kind:6s} {size:4d}  total {median:8.3f} s  sample {statistics.median(samples):8.3f} s",
+            flush=True,
+        )
 
     lines = [
         "# texsyn method timings",
@@ -132,7 +143,9 @@ def main(argv: list[str] | None = None) -> int:
     ]
     for name, kind, size, total, sample, runs, target, verdict in rows:
         tgt = "" if target is None else f"{target:g}"
-        lines.append(f"| {name} | {kind} | {size} | {total:.3f} | {sample:.3f} | {runs} | {tgt} | {verdict} |")
+        lines.append(
+            f"| {name} | {kind} | {size} | {total:.3f} | {sample:.3f} | {runs} | {tgt} | {verdict} |"
+        )
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text("\n".join(lines) + "\n")
     print(f"\nwrote {args.out}")

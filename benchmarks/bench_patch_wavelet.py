@@ -26,13 +26,17 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _common import machine, parser
 
 import texsyn
-from _common import machine, parser
 from texsyn.io import read_image, write_image
 from texsyn.ops import wrap_seam_ratio
 
-SYNTHESIS_FILES = ["gh_tartavel_vistex/Brick-00.png", "gh_tartavel_vistex/Sand-01.png", "gh_tartavel_vistex/Fabric-13.png"]
+SYNTHESIS_FILES = [
+    "gh_tartavel_vistex/Brick-00.png",
+    "gh_tartavel_vistex/Sand-01.png",
+    "gh_tartavel_vistex/Fabric-13.png",
+]
 #: (input texture, exemplar) pairs of the modification experiment
 PAIRS = [
     ("gh_lcv_textureSynth/nuts.png", "gh_lcv_textureSynth/text.png"),
@@ -54,8 +58,7 @@ def main(argv: list[str] | None = None) -> int:
     lines = [
         "# Patch-valued wavelet transform (Peyré 2007)",
         "",
-        machine() + " "
-        "Default parameters.",
+        machine() + " Default parameters.",
         "",
     ]
 
@@ -64,8 +67,12 @@ def main(argv: list[str] | None = None) -> int:
     texsyn.make_method("patch_wavelet", sigma=0.1).fit(warm).sample((32, 32), rng=0)
 
     # ------------------------------------------------------------------ synthesis timings
-    lines += ["## Synthesis, 128x128 colour exemplar -> 256x256 (target 10 s)", "",
-              "| exemplar | fit (s) | sample (s) | fit + sample (s) | seam ratio of the 2x2 tiling |", "|---|---:|---:|---:|---:|"]
+    lines += [
+        "## Synthesis, 128x128 colour exemplar -> 256x256 (target 10 s)",
+        "",
+        "| exemplar | fit (s) | sample (s) | fit + sample (s) | seam ratio of the 2x2 tiling |",
+        "|---|---:|---:|---:|---:|",
+    ]
     totals = []
     for name in SYNTHESIS_FILES:
         ex = read_image(args.textures / name)[:128, :128]
@@ -82,7 +89,9 @@ def main(argv: list[str] | None = None) -> int:
         totals.append(total)
         stem = Path(name).stem
         write_image(args.images / f"patch_wavelet_synthesis_{stem}_tiled.png", np.tile(image, (2, 2, 1)))
-        lines.append(f"| {stem} | {statistics.median(fits):.2f} | {statistics.median(samples):.2f} | {total:.2f} | {wrap_seam_ratio(image):.2f} |")
+        lines.append(
+            f"| {stem} | {statistics.median(fits):.2f} | {statistics.median(samples):.2f} | {total:.2f} | {wrap_seam_ratio(image):.2f} |"
+        )
         print(lines[-1], flush=True)
     lines += ["", f"Median fit + sample: **{statistics.median(totals):.2f} s** (target 10 s).", ""]
 
@@ -93,9 +102,18 @@ def main(argv: list[str] | None = None) -> int:
     pure = method.sample((256, 256), rng=7, callback=lambda p: frames.append(p.image))
     strip = [np.kron(f, np.ones((256 // f.shape[0], 256 // f.shape[1], 1))) for f in frames]
     write_image(args.images / "patch_wavelet_progression.png", np.concatenate(strip, axis=1))
-    profiles = {"none": (0.0,), "fine": (0.3, 0.3, 0.3), "coarse": (0, 0, 0, 0.3, 0.3, 0.3, 0.3), "all": (0.2,)}
-    lines += ["## Sigma profiles (Fig. 6), same seed as the pure synthesis", "",
-              "| profile (finest level first) | pixels differing from the pure synthesis | image |", "|---|---:|---|"]
+    profiles = {
+        "none": (0.0,),
+        "fine": (0.3, 0.3, 0.3),
+        "coarse": (0, 0, 0, 0.3, 0.3, 0.3, 0.3),
+        "all": (0.2,),
+    }
+    lines += [
+        "## Sigma profiles (Fig. 6), same seed as the pure synthesis",
+        "",
+        "| profile (finest level first) | pixels differing from the pure synthesis | image |",
+        "|---|---:|---|",
+    ]
     for label, sigma in profiles.items():
         image = texsyn.make_method("patch_wavelet", sigma=sigma).fit(ex).sample((256, 256), rng=7)
         path = f"patch_wavelet_sigma_{label}.png"
@@ -103,7 +121,11 @@ def main(argv: list[str] | None = None) -> int:
         diff = np.mean(np.any(image != pure, axis=-1))
         lines.append(f"| {label}: {','.join(f'{s:g}' for s in sigma)} | {diff:.3f} | {path} |")
         print(lines[-1], flush=True)
-    lines += ["", "Progression (Fig. 4): patch_wavelet_progression.png (2x2 up to 256x256, nearest-neighbour enlarged).", ""]
+    lines += [
+        "",
+        "Progression (Fig. 4): patch_wavelet_progression.png (2x2 up to 256x256, nearest-neighbour enlarged).",
+        "",
+    ]
 
     # ------------------------------------------------------------------ modification
     lines += ["## Modification of a 256x256 texture (target 30 s, LLE included)", ""]
@@ -118,10 +140,15 @@ def main(argv: list[str] | None = None) -> int:
         results = method.modify(texture, list(RATIOS))
         t2 = time.perf_counter()
         a, b = Path(input_name).stem, Path(exemplar_name).stem
-        lines += [f"### {a} (input, {texture.shape[1]}x{texture.shape[0]}) with the features of {b} (exemplar, 128x128)", "",
-                  f"One modification (fit + equalisation + features + LLE + forward + inverse): **{t1 - t0:.1f} s**; "
-                  f"the four ratios sharing one analysis: {t2 - t1:.1f} s.", "",
-                  "| ratio | pixels keeping their ratio-0 coordinate | details kept | image | magnitudes |", "|---:|---:|---:|---|---|"]
+        lines += [
+            f"### {a} (input, {texture.shape[1]}x{texture.shape[0]}) with the features of {b} (exemplar, 128x128)",
+            "",
+            f"One modification (fit + equalisation + features + LLE + forward + inverse): **{t1 - t0:.1f} s**; "
+            f"the four ratios sharing one analysis: {t2 - t1:.1f} s.",
+            "",
+            "| ratio | pixels keeping their ratio-0 coordinate | details kept | image | magnitudes |",
+            "|---:|---:|---:|---|---|",
+        ]
         base = results[0].source_map
         n_details = np.count_nonzero(results[0].magnitudes)
         write_image(args.images / f"patch_wavelet_modify_{a}_input.png", texture)

@@ -19,9 +19,9 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _common import machine, parser
 
 import texsyn
-from _common import machine, parser
 from texsyn.io import read_image, write_image
 from texsyn.metrics import ps_distance
 from texsyn.ops import luma
@@ -48,7 +48,9 @@ def main(argv: list[str] | None = None) -> int:
         "| exemplar | image | fit + 50 iterations (s) | PS distance: noise | PS distance: output | factor | image |",
         "|---|---|---:|---:|---:|---:|---|",
     ]
-    texsyn.synthesize(read_image(args.textures / FILES[2])[:64, :64], "portilla_simoncelli", (64, 64), rng=0, n_iterations=2)
+    texsyn.synthesize(
+        read_image(args.textures / FILES[2])[:64, :64], "portilla_simoncelli", (64, 64), rng=0, n_iterations=2
+    )
     times = {"grey": [], "colour": []}
     covariances = []
     for name in FILES:
@@ -65,23 +67,40 @@ def main(argv: list[str] | None = None) -> int:
             elapsed = statistics.median(runs)
             times[kind].append(elapsed)
             rng = np.random.default_rng(0)
-            noise = np.clip(image.mean(axis=(0, 1)) + image.std(axis=(0, 1)) * rng.standard_normal(out.shape), 0, 1)
+            noise = np.clip(
+                image.mean(axis=(0, 1)) + image.std(axis=(0, 1)) * rng.standard_normal(out.shape), 0, 1
+            )
             d_noise, d_out = ps_distance(noise, image), ps_distance(out, image)
             file = f"portilla_{Path(name).stem}_{kind}.png"
             write_image(args.images / file, out)
-            lines.append(f"| {Path(name).stem} | {kind} | {elapsed:.2f} | {d_noise:.3f} | {d_out:.4f} | {d_noise / d_out:.0f} | {file} |")
+            lines.append(
+                f"| {Path(name).stem} | {kind} | {elapsed:.2f} | {d_noise:.3f} | {d_out:.4f} | {d_noise / d_out:.0f} | {file} |"
+            )
             print(lines[-1], flush=True)
             if kind == "colour":
-                covariances.append((Path(name).stem, np.cov(image.reshape(-1, 3).T), np.cov(out.reshape(-1, 3).T)))
-    lines += ["", f"Median time: grey **{statistics.median(times['grey']):.2f} s** (target 3 s), colour "
-              f"**{statistics.median(times['colour']):.2f} s** (target 8 s).", "",
-              "## Colour covariance (x 1000), exemplar vs output", "",
-              "| exemplar | exemplar covariance | output covariance | relative Frobenius error |", "|---|---|---|---:|"]
+                covariances.append(
+                    (Path(name).stem, np.cov(image.reshape(-1, 3).T), np.cov(out.reshape(-1, 3).T))
+                )
+    lines += [
+        "",
+        f"Median time: grey **{statistics.median(times['grey']):.2f} s** (target 3 s), colour "
+        f"**{statistics.median(times['colour']):.2f} s** (target 8 s).",
+        "",
+        "## Colour covariance (x 1000), exemplar vs output",
+        "",
+        "| exemplar | exemplar covariance | output covariance | relative Frobenius error |",
+        "|---|---|---|---:|",
+    ]
     for stem, a, b in covariances:
         fmt = lambda c: "; ".join(", ".join(f"{1000 * v:.2f}" for v in row) for row in c)  # noqa: E731
         lines.append(f"| {stem} | {fmt(a)} | {fmt(b)} | {np.linalg.norm(a - b) / np.linalg.norm(a):.3f} |")
-    lines += ["", "## MSLG refined by Portilla-Simoncelli (Raad et al. 2016, Fig. 8)", "",
-              "| exemplar | MSLG PS distance | MSLG + PS (10 iterations) PS distance | extra time (s) |", "|---|---:|---:|---:|"]
+    lines += [
+        "",
+        "## MSLG refined by Portilla-Simoncelli (Raad et al. 2016, Fig. 8)",
+        "",
+        "| exemplar | MSLG PS distance | MSLG + PS (10 iterations) PS distance | extra time (s) |",
+        "|---|---:|---:|---:|",
+    ]
     for name in FILES[2:]:
         ex = read_image(args.textures / name)[:128, :128]
         t0 = time.perf_counter()
@@ -91,7 +110,9 @@ def main(argv: list[str] | None = None) -> int:
         t2 = time.perf_counter()
         write_image(args.images / f"mslg_{Path(name).stem}.png", plain)
         write_image(args.images / f"mslg_ps_{Path(name).stem}.png", post)
-        lines.append(f"| {Path(name).stem} | {ps_distance(plain, ex):.4f} | {ps_distance(post, ex):.4f} | {(t2 - t1) - (t1 - t0):.2f} |")
+        lines.append(
+            f"| {Path(name).stem} | {ps_distance(plain, ex):.4f} | {ps_distance(post, ex):.4f} | {(t2 - t1) - (t1 - t0):.2f} |"
+        )
         print(lines[-1], flush=True)
     lines.append("")
     args.out.write_text("\n".join(lines) + "\n")

@@ -38,7 +38,11 @@ SIZE_EXEMPLAR = "gh_tartavel_vistex/Brick-00.png"
 
 
 def load_textures(folder: Path, limit: int | None) -> list[tuple[str, np.ndarray]]:
-    paths = sorted(p for p in folder.rglob("*") if p.suffix.lower() in (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".gif", ".bmp"))
+    paths = sorted(
+        p
+        for p in folder.rglob("*")
+        if p.suffix.lower() in (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".gif", ".bmp")
+    )
     if limit:
         paths = paths[:limit]
     out = []
@@ -66,7 +70,10 @@ def quality_table(textures, methods) -> tuple[list[str], dict]:
             per_method[name]["seconds"].append(seconds)
             for key, value in scores.items():
                 per_method[name].setdefault(key, []).append(value)
-            print(f"{label:40s} {name:15s} {seconds:8.3f} s  coherence {scores['patch_coherence']:.4f}  copied {scores['copied_share']:.3f}", flush=True)
+            print(
+                f"{label:40s} {name:15s} {seconds:8.3f} s  coherence {scores['patch_coherence']:.4f}  copied {scores['copied_share']:.3f}",
+                flush=True,
+            )
     keys = list(METRIC_DESCRIPTIONS)
     lines = [
         "| method | textures | median time (s) | " + " | ".join(k.replace("_", " ") for k in keys) + " |",
@@ -78,7 +85,9 @@ def quality_table(textures, methods) -> tuple[list[str], dict]:
             lines.append(f"| {name} | 0 | | " + " | ".join("" for _ in keys) + " |")
             continue
         cells = " | ".join(f"{statistics.median(data[k]):.4g}" for k in keys)
-        lines.append(f"| {name} | {len(data['seconds'])} | {statistics.median(data['seconds']):.3f} | {cells} |")
+        lines.append(
+            f"| {name} | {len(data['seconds'])} | {statistics.median(data['seconds']):.3f} | {cells} |"
+        )
     notes = [f"- {name}: skipped {f}" for name, fs in failures.items() for f in fs]
     return lines + ([""] + notes if notes else []), per_method
 
@@ -144,17 +153,28 @@ def main(argv: list[str] | None = None) -> int:
         "",
         *table,
         "",
-        "Metrics: " + "; ".join(f"*{k.replace('_', ' ')}*: {v}" for k, v in METRIC_DESCRIPTIONS.items()) + ".",
+        "Metrics: "
+        + "; ".join(f"*{k.replace('_', ' ')}*: {v}" for k, v in METRIC_DESCRIPTIONS.items())
+        + ".",
     ]
     if args.sizes:
         size_path = args.textures / SIZE_EXEMPLAR
         exemplar = read_image(size_path)[:128, :128] if size_path.exists() else textures[0][1]
         sweep = size_sweep(exemplar, args.methods, args.sizes, args.budget)
-        lines += ["", "## Sample time against output size", "", "| method | " + " | ".join(f"{s}x{s}" for s in args.sizes) + " |",
-                  "|---|" + "---:|" * len(args.sizes)]
+        lines += [
+            "",
+            "## Sample time against output size",
+            "",
+            "| method | " + " | ".join(f"{s}x{s}" for s in args.sizes) + " |",
+            "|---|" + "---:|" * len(args.sizes),
+        ]
         for name, points in sweep.items():
             got = dict(points)
-            lines.append(f"| {name} | " + " | ".join(f"{got[s]:.3f}" if s in got else "(skipped)" for s in args.sizes) + " |")
+            lines.append(
+                f"| {name} | "
+                + " | ".join(f"{got[s]:.3f}" if s in got else "(skipped)" for s in args.sizes)
+                + " |"
+            )
         lines.append(f"\nA method stops at the first size that took over {args.budget:g} s.")
         if plot(sweep, args.plot):
             lines.append(f"\n![time against size]({args.plot.name})")

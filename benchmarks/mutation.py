@@ -63,7 +63,12 @@ REPO = Path(__file__).resolve().parents[1]
 #: paper method -> (core modules under src/texsyn, its test files)
 GROUPS: dict[str, tuple[list[str], list[str]]] = {
     "patch_wavelet": (
-        ["transforms/patch_wavelet.py", "models/patch_wavelet.py", "models/patch_embedding.py", "methods/patch_wavelet.py"],
+        [
+            "transforms/patch_wavelet.py",
+            "models/patch_wavelet.py",
+            "models/patch_embedding.py",
+            "methods/patch_wavelet.py",
+        ],
         ["tests/test_patch_wavelet.py", "tests/test_strength_patch_wavelet.py"],
     ),
     "cwt": (
@@ -71,7 +76,13 @@ GROUPS: dict[str, tuple[list[str], list[str]]] = {
         ["tests/test_ops_dtcwt.py", "tests/test_methods_wavelet.py", "tests/test_strength_classic.py"],
     ),
     "grouplets": (
-        ["transforms/grouplets.py", "models/grouplets.py", "ops/flow.py", "ops/fluid.py", "methods/grouplets.py"],
+        [
+            "transforms/grouplets.py",
+            "models/grouplets.py",
+            "ops/flow.py",
+            "ops/fluid.py",
+            "methods/grouplets.py",
+        ],
         ["tests/test_grouplets.py", "tests/test_strength_grouplets.py"],
     ),
     "sparse": (
@@ -79,7 +90,13 @@ GROUPS: dict[str, tuple[list[str], list[str]]] = {
         ["tests/test_sparse.py", "tests/test_strength_classic.py"],
     ),
     "lg": (
-        ["models/gaussian.py", "drivers/raster.py", "methods/single_scale_gaussian.py", "methods/gaussian.py", "methods/multiscale_gaussian.py"],
+        [
+            "models/gaussian.py",
+            "drivers/raster.py",
+            "methods/single_scale_gaussian.py",
+            "methods/gaussian.py",
+            "methods/multiscale_gaussian.py",
+        ],
         ["tests/test_methods_gaussian.py", "tests/test_strength_gaussian.py"],
     ),
 }
@@ -93,9 +110,21 @@ GAP_TESTS = "tests/test_mutation_gaps.py"
 #: last digits of the mutant number kept by --every N
 SAMPLE_DIGITS = {1: None, 2: "[02468]", 5: "[05]", 10: "0"}
 #: exit codes in mutmut's meta files -> status (mutmut.stats.status_by_exit_code)
-STATUS = {1: "killed", 3: "killed", 0: "survived", 5: "no tests", 33: "no tests", 34: "skipped",
-          36: "timeout", 24: "timeout", -24: "timeout", 152: "timeout", 255: "timeout",
-          37: "type check", None: "not checked"}
+STATUS = {
+    1: "killed",
+    3: "killed",
+    0: "survived",
+    5: "no tests",
+    33: "no tests",
+    34: "skipped",
+    36: "timeout",
+    24: "timeout",
+    -24: "timeout",
+    152: "timeout",
+    255: "timeout",
+    37: "type check",
+    None: "not checked",
+}
 COLUMNS = ("killed", "survived", "timeout", "suspicious", "no tests")
 #: names of the memory-model functions, left out unless --include-memory-model
 MEMORY_MODEL = re.compile(r"memory|_terms$|_bytes$|^_width_dims$|^_levels_widths$")
@@ -121,8 +150,13 @@ def functions(path: Path) -> list[tuple[str, str, str | None]]:
                 key = f"x\u01c1{cls}\u01c1{node.name}" if cls else f"x_{node.name}"
                 names = [ast.unparse(d) for d in node.decorator_list]
                 skipped = names and not (len(names) == 1 and names[0] in ("staticmethod", "classmethod"))
-                out.append((key, f"{cls}.{node.name}" if cls else node.name,
-                            "@" + ", @".join(names) if skipped else None))
+                out.append(
+                    (
+                        key,
+                        f"{cls}.{node.name}" if cls else node.name,
+                        "@" + ", @".join(names) if skipped else None,
+                    )
+                )
 
     visit(ast.parse(path.read_text()).body)
     return out
@@ -162,7 +196,7 @@ def prepare(group: str, workdir: Path, deselect: list[str]) -> tuple[Path, list[
     shutil.copytree(REPO / "tests", here / "tests", ignore=ignore)
     text = (REPO / "pyproject.toml").read_text()
     start = text.index("[tool.mutmut]")
-    nxt = re.search(r"^\[", text[start + 1:], flags=re.MULTILINE)
+    nxt = re.search(r"^\[", text[start + 1 :], flags=re.MULTILINE)
     end = start + 1 + nxt.start() if nxt else len(text)
     (here / "pyproject.toml").write_text(text[:start] + mutmut_section(group, tests, deselect) + text[end:])
     return here, tests
@@ -174,8 +208,14 @@ def mutmut(here: Path, *args: str, capture: bool = False) -> subprocess.Complete
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
         env[var] = "1"
     env.pop("TEXSYN_SABOTAGE", None)
-    return subprocess.run([str(exe if exe.exists() else "mutmut"), *args], cwd=here, env=env,
-                          capture_output=capture, text=True, check=False)
+    return subprocess.run(
+        [str(exe if exe.exists() else "mutmut"), *args],
+        cwd=here,
+        env=env,
+        capture_output=capture,
+        text=True,
+        check=False,
+    )
 
 
 def summarise(group: str, here: Path) -> dict:
@@ -202,10 +242,15 @@ def summarise(group: str, here: Path) -> dict:
         tested = sum(counts.values())
         funcs = functions(REPO / "src" / "texsyn" / module)
         rows[module_name(module)] = {
-            "generated": len(codes), "memory_model": memory, "tested": tested, **counts,
+            "generated": len(codes),
+            "memory_model": memory,
+            "tested": tested,
+            **counts,
             "score": (counts["killed"] + counts["timeout"]) / tested if tested else None,
             "not_mutated": [f"{name} ({deco})" for _, name, deco in funcs if deco],
-            "memory_model_functions": [name for key, name, deco in funcs if not deco and is_memory_model(key)],
+            "memory_model_functions": [
+                name for key, name, deco in funcs if not deco and is_memory_model(key)
+            ],
             "survivors": sorted(survivors),
             "status": statuses,
         }
@@ -228,10 +273,16 @@ def merge(earlier: dict, now: dict) -> dict:
             else:
                 survivors.append((key, after))
         tested = sum(counts.values())
-        out[module] = {**row, **counts, "tested": tested,
-                       "score": (counts["killed"] + counts["timeout"]) / tested if tested else None,
-                       "survivors": survivors, "killed_on_rerun": killed,
-                       "not_mutated": now[module]["not_mutated"], "status": status}
+        out[module] = {
+            **row,
+            **counts,
+            "tested": tested,
+            "score": (counts["killed"] + counts["timeout"]) / tested if tested else None,
+            "survivors": survivors,
+            "killed_on_rerun": killed,
+            "not_mutated": now[module]["not_mutated"],
+            "status": status,
+        }
     return out
 
 
@@ -250,23 +301,32 @@ def write_survivors(here: Path, rows: dict) -> Path:
     """Every survivor's diff, as ``mutmut show`` prints it (one process for all)."""
     out = here / "survivors.txt"
     keys = "".join(f"{key}\t{status}\n" for row in rows.values() for key, status in row["survivors"])
-    done = subprocess.run([sys.executable, "-c", SHOW], cwd=here, input=keys, capture_output=True, text=True,
-                          check=False)
+    done = subprocess.run(
+        [sys.executable, "-c", SHOW], cwd=here, input=keys, capture_output=True, text=True, check=False
+    )
     text = done.stdout
     if done.returncode != 0:  # another mutmut version: one `mutmut show` per mutant
-        text = "".join(f"### {key} [{status}]\n" + mutmut(here, "show", key, capture=True).stdout + "\n"
-                       for row in rows.values() for key, status in row["survivors"])
+        text = "".join(
+            f"### {key} [{status}]\n" + mutmut(here, "show", key, capture=True).stdout + "\n"
+            for row in rows.values()
+            for key, status in row["survivors"]
+        )
     out.write_text(text)
     return out
 
 
 def print_table(rows: dict) -> None:
-    head = f"{'module':34} {'mutants':>7} {'memory':>6} {'tested':>6} " + " ".join(f"{c:>10}" for c in COLUMNS)
+    head = f"{'module':34} {'mutants':>7} {'memory':>6} {'tested':>6} " + " ".join(
+        f"{c:>10}" for c in COLUMNS
+    )
     print(head + "   score")
     for module, r in rows.items():
         score = "-" if r["score"] is None else f"{100 * r['score']:.1f}%"
-        print(f"{module:34} {r['generated']:7d} {r['memory_model']:6d} {r['tested']:6d} "
-              + " ".join(f"{r[c]:10d}" for c in COLUMNS) + f"   {score}")
+        print(
+            f"{module:34} {r['generated']:7d} {r['memory_model']:6d} {r['tested']:6d} "
+            + " ".join(f"{r[c]:10d}" for c in COLUMNS)
+            + f"   {score}"
+        )
         for name in r["not_mutated"]:
             print(f"    not mutated: {name}")
         if r["memory_model_functions"]:
@@ -275,23 +335,52 @@ def print_table(rows: dict) -> None:
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("groups", nargs="*", default=[], metavar="GROUP",
-                   help=f"paper methods to run ({', '.join(GROUPS)}; default all)")
-    p.add_argument("--every", type=int, default=1, choices=sorted(SAMPLE_DIGITS),
-                   help="run every N-th mutant only (by the last digit of its number)")
-    p.add_argument("--functions", nargs="+", default=[], metavar="GLOB",
-                   help="run only the mutants whose name matches one of these mutmut globs")
-    p.add_argument("--rerun", type=Path, metavar="FILE",
-                   help="retest only the mutants not killed in this earlier --json, and merge")
-    p.add_argument("--include-memory-model", action="store_true",
-                   help="mutate the memory model (memory_terms and its helpers) too")
+    p.add_argument(
+        "groups",
+        nargs="*",
+        default=[],
+        metavar="GROUP",
+        help=f"paper methods to run ({', '.join(GROUPS)}; default all)",
+    )
+    p.add_argument(
+        "--every",
+        type=int,
+        default=1,
+        choices=sorted(SAMPLE_DIGITS),
+        help="run every N-th mutant only (by the last digit of its number)",
+    )
+    p.add_argument(
+        "--functions",
+        nargs="+",
+        default=[],
+        metavar="GLOB",
+        help="run only the mutants whose name matches one of these mutmut globs",
+    )
+    p.add_argument(
+        "--rerun",
+        type=Path,
+        metavar="FILE",
+        help="retest only the mutants not killed in this earlier --json, and merge",
+    )
+    p.add_argument(
+        "--include-memory-model",
+        action="store_true",
+        help="mutate the memory model (memory_terms and its helpers) too",
+    )
     p.add_argument("--max-children", type=int, default=1)
-    p.add_argument("--deselect", action="append", default=[], metavar="NODEID",
-                   help="leave this test out of the selection (repeatable)")
+    p.add_argument(
+        "--deselect",
+        action="append",
+        default=[],
+        metavar="NODEID",
+        help="leave this test out of the selection (repeatable)",
+    )
     p.add_argument("--workdir", type=Path, default=Path(tempfile.gettempdir()) / "texsyn-mutation")
-    p.add_argument("--json", type=Path,
-                   help="write the counts and survivors of every group here (an existing file keeps "
-                        "the groups not run)")
+    p.add_argument(
+        "--json",
+        type=Path,
+        help="write the counts and survivors of every group here (an existing file keeps the groups not run)",
+    )
     args = p.parse_args(argv)
     unknown = [g for g in args.groups if g not in GROUPS]
     if unknown:
@@ -312,11 +401,16 @@ def main(argv=None) -> int:
                 summary[group] = earlier
                 continue
         elif args.functions:
-            names = [n.rstrip("*") + ("*" if "__mutmut_" in n else "*__mutmut_*") + digits for n in args.functions]
+            names = [
+                n.rstrip("*") + ("*" if "__mutmut_" in n else "*__mutmut_*") + digits for n in args.functions
+            ]
         else:
-            names = [f"{module_name(m)}.{key}__mutmut_*{digits}" for m in modules
-                     for key, _, deco in functions(REPO / "src" / "texsyn" / m)
-                     if not deco and (args.include_memory_model or not is_memory_model(key))]
+            names = [
+                f"{module_name(m)}.{key}__mutmut_*{digits}"
+                for m in modules
+                for key, _, deco in functions(REPO / "src" / "texsyn" / m)
+                if not deco and (args.include_memory_model or not is_memory_model(key))
+            ]
         print(f"[{group}] mutating {', '.join(modules)}; tests: {' '.join(tests)}; in {here}")
         started = time.perf_counter()
         run_args = ["run", "--max-children", str(args.max_children)]
@@ -332,12 +426,21 @@ def main(argv=None) -> int:
         survivors = write_survivors(here, rows)
         print(f"[{group}] {wall:.0f} s wall; survivors' diffs in {survivors}")
         print_table(rows)
-        summary[group] = {"wall_s": round(wall), "every": args.every, "functions": args.functions,
-                          "tests": tests, "deselect": DESELECT.get(group, []) + args.deselect,
-                          "modules": rows}
+        summary[group] = {
+            "wall_s": round(wall),
+            "every": args.every,
+            "functions": args.functions,
+            "tests": tests,
+            "deselect": DESELECT.get(group, []) + args.deselect,
+            "modules": rows,
+        }
         if earlier:
-            summary[group].update(every=earlier["every"], functions=earlier["functions"],
-                                  wall_s=earlier["wall_s"], rerun_wall_s=round(wall))
+            summary[group].update(
+                every=earlier["every"],
+                functions=earlier["functions"],
+                wall_s=earlier["wall_s"],
+                rerun_wall_s=round(wall),
+            )
     for run in summary.values():
         for row in run["modules"].values():
             row.pop("status", None)

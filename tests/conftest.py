@@ -11,7 +11,7 @@ import pytest
 import texsyn
 
 sys.path.insert(0, os.path.dirname(__file__))
-import sabotage  # noqa: E402  (tests/sabotage.py: deliberate breakage for the sabotage harness)
+import sabotage
 
 
 def pytest_addoption(parser):
@@ -52,9 +52,7 @@ def grey_exemplar() -> np.ndarray:
 def colour_exemplar() -> np.ndarray:
     """A 40x40 colour texture with correlated channels, mixed from scikit-image's grass,
     gravel and brick (a greenish, natural-looking colour distribution)."""
-    layers = np.stack(
-        [texsyn.data.exemplar(name, size=40) for name in ("grass", "gravel", "brick")], axis=-1
-    )
+    layers = np.stack([texsyn.data.exemplar(name, size=40) for name in ("grass", "gravel", "brick")], axis=-1)
     mix = np.array([[0.5, 0.3, 0.2], [0.6, 0.3, 0.1], [0.2, 0.2, 0.6]])
     return (layers @ mix.T).astype(np.float32)
 
@@ -71,7 +69,15 @@ FAST_PARAMS = {
     "mslg": {"patch_size": 8, "n_neighbors": 8, "n_scales": 2},
     "cwt": {"levels": 2, "seed": "random"},
     "wei_levoy": {"levels": 2, "window": 5, "parent_window": 3},
-    "sparse": {"patch_size": 6, "step": 3, "n_scales": 2, "n_atoms": 24, "ksvd_iterations": 2, "n_outer": 3, "n_inner": 3},
+    "sparse": {
+        "patch_size": 6,
+        "step": 3,
+        "n_scales": 2,
+        "n_atoms": 24,
+        "ksvd_iterations": 2,
+        "n_outer": 3,
+        "n_inner": 3,
+    },
     "patch_wavelet": {"sigma": (0.0, 0.2)},
     "grouplets": {"n_iterations": 3, "levels": 2, "grouplet_levels": 3},
     "portilla_simoncelli": {"n_scales": 2, "n_iterations": 3},

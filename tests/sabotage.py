@@ -113,7 +113,9 @@ def install() -> str | None:
                     image = first
                 elif kind == "independent":
                     size = frame.image.shape[:2]
-                    image = self._as_output(self._along(frame.flow, np.random.default_rng(1000 + frame.index), None))
+                    image = self._as_output(
+                        self._along(frame.flow, np.random.default_rng(1000 + frame.index), None)
+                    )
                     image = image if image.shape[:2] == size else image[: size[0], : size[1]]
                 else:
                     image = _broken(kind, frame.image, None)[0]

@@ -54,7 +54,9 @@ def run(capsys, *args) -> tuple[int, str]:
     return code, captured.err
 
 
-def check_one_line(code: int, err: str, status: int, message: str | None = None, prefix: str = "texsyn: error: "):
+def check_one_line(
+    code: int, err: str, status: int, message: str | None = None, prefix: str = "texsyn: error: "
+):
     assert code == status, err
     assert "Traceback" not in err
     lines = err.strip().splitlines()
@@ -94,25 +96,84 @@ CASES = [
     # an output that names an input or another output: refused whatever --overwrite says
     ("output is the exemplar", ["synth", "ex.png", "-o", "ex.png"], "is the exemplar"),
     ("output is ./exemplar", ["synth", "ex.png", "-o", "./ex.png", "--overwrite"], "is the exemplar"),
-    ("output is a symlink to the exemplar", ["synth", "ex.png", "-o", "link.png", "--overwrite"], "is the exemplar"),
-    ("output is a hard link to the exemplar", ["synth", "ex.png", "-o", "hard.png", "--overwrite"], "is the exemplar"),
-    ("source map is the output", ["synth", "ex.png", "-o", "o.png", "--source-map", "o.png"], "name the same file"),
-    ("source map is the exemplar", ["synth", "ex.png", "-o", "o.png", "--source-map", "ex.png", "--overwrite"], "is the exemplar"),
+    (
+        "output is a symlink to the exemplar",
+        ["synth", "ex.png", "-o", "link.png", "--overwrite"],
+        "is the exemplar",
+    ),
+    (
+        "output is a hard link to the exemplar",
+        ["synth", "ex.png", "-o", "hard.png", "--overwrite"],
+        "is the exemplar",
+    ),
+    (
+        "source map is the output",
+        ["synth", "ex.png", "-o", "o.png", "--source-map", "o.png"],
+        "name the same file",
+    ),
+    (
+        "source map is the exemplar",
+        ["synth", "ex.png", "-o", "o.png", "--source-map", "ex.png", "--overwrite"],
+        "is the exemplar",
+    ),
     ("sidecar is the exemplar", ["synth", "in.png.json", "-o", "in.png", "--overwrite"], "is the exemplar"),
-    ("magnitudes is INPUT", ["modify", "ex.png", "-e", "builtin:brick", "-o", "m.png", "--magnitudes", "ex.png", "--overwrite"], "is the INPUT"),
-    ("modify output is the exemplar", ["modify", "builtin:gravel", "-e", "ex.png", "-o", "ex.png", "--overwrite"], "is the exemplar"),
-    ("modify source map is the magnitudes", ["modify", "ex.png", "-e", "builtin:brick", "-o", "m.png", "--magnitudes", "x.npy", "--source-map", "./x.npy"], "name the same file"),
-    ("output is the flow file", ["synth", "-m", "grouplets", "--flow", "flow.png", "-o", "flow.png", "--overwrite"], "is the flow file"),
-    ("frame folder holds the exemplar", ["animate", "frames/frame_00000.png", "-o", "frames", "--overwrite"], "folder of the exemplar"),
+    (
+        "magnitudes is INPUT",
+        ["modify", "ex.png", "-e", "builtin:brick", "-o", "m.png", "--magnitudes", "ex.png", "--overwrite"],
+        "is the INPUT",
+    ),
+    (
+        "modify output is the exemplar",
+        ["modify", "builtin:gravel", "-e", "ex.png", "-o", "ex.png", "--overwrite"],
+        "is the exemplar",
+    ),
+    (
+        "modify source map is the magnitudes",
+        [
+            "modify",
+            "ex.png",
+            "-e",
+            "builtin:brick",
+            "-o",
+            "m.png",
+            "--magnitudes",
+            "x.npy",
+            "--source-map",
+            "./x.npy",
+        ],
+        "name the same file",
+    ),
+    (
+        "output is the flow file",
+        ["synth", "-m", "grouplets", "--flow", "flow.png", "-o", "flow.png", "--overwrite"],
+        "is the flow file",
+    ),
+    (
+        "frame folder holds the exemplar",
+        ["animate", "frames/frame_00000.png", "-o", "frames", "--overwrite"],
+        "folder of the exemplar",
+    ),
     ("compare report with an image name", ["compare", "ex.png", "-o", "ex.png"], "unsupported file type"),
     # existing outputs are kept without --overwrite, for every command
     ("synth existing output", ["synth", "-o", "existing.png", *FAST], "already exists"),
     ("synth existing sidecar", ["synth", "-o", "side.png", *FAST], "already exists"),
-    ("synth existing source map", ["synth", "ex.png", "-o", "new.png", "--source-map", "existing.png", "-p", "patch_size=8", "-q"], "already exists"),
-    ("modify existing output", ["modify", "ex.png", "-e", "builtin:brick", "-o", "existing.png", "-q"], "already exists"),
+    (
+        "synth existing source map",
+        ["synth", "ex.png", "-o", "new.png", "--source-map", "existing.png", "-p", "patch_size=8", "-q"],
+        "already exists",
+    ),
+    (
+        "modify existing output",
+        ["modify", "ex.png", "-e", "builtin:brick", "-o", "existing.png", "-q"],
+        "already exists",
+    ),
     ("animate existing video", ["animate", "-o", "existing.gif", "--frames", "2", "-q"], "already exists"),
     ("animate existing frame folder", ["animate", "-o", "frames", "--frames", "2", "-q"], "already exists"),
-    ("animate over a folder of other files", ["animate", "-o", "notes", "--frames", "2", "-q", "--overwrite"], "other than frame"),
+    (
+        "animate over a folder of other files",
+        ["animate", "-o", "notes", "--frames", "2", "-q", "--overwrite"],
+        "other than frame",
+    ),
     ("compare existing sidecar", ["compare", "-o", "old.html", "-m", "random_phase", "-q"], "already exists"),
     # output folders
     ("missing folder", ["synth", "-o", "nowhere/o.png", *FAST], "does not exist"),
@@ -145,10 +206,26 @@ CASES = [
     ("viscosity inf", ["animate", "-o", "a.gif", "--viscosity", "inf"], "finite"),
     ("patch_size nan", ["synth", "-o", "o.png", "-p", "patch_size=nan"], "patch_size"),
     ("tolerance inf", ["synth", "-o", "o.png", "-p", "tolerance=inf"], "tolerance"),
-    ("tuple parameter with nan", ["modify", "ex.png", "-e", "builtin:brick", "-o", "m.png", "-p", "sigma=0,nan"], "sigma"),
-    ("flow constant:inf", ["synth", "-m", "grouplets", "-p", "flow=constant:inf", "-o", "o.png", "--size", "16x16", "-q"], "constant:ANGLE"),
-    ("flow constant:abc", ["synth", "-m", "grouplets", "-p", "flow=constant:abc", "-o", "o.png", "--size", "16x16", "-q"], "constant:ANGLE"),
-    ("flow file with nan", ["synth", "-m", "grouplets", "--flow", "nan_flow.npy", "-o", "o.png", "-q"], "NaN"),
+    (
+        "tuple parameter with nan",
+        ["modify", "ex.png", "-e", "builtin:brick", "-o", "m.png", "-p", "sigma=0,nan"],
+        "sigma",
+    ),
+    (
+        "flow constant:inf",
+        ["synth", "-m", "grouplets", "-p", "flow=constant:inf", "-o", "o.png", "--size", "16x16", "-q"],
+        "constant:ANGLE",
+    ),
+    (
+        "flow constant:abc",
+        ["synth", "-m", "grouplets", "-p", "flow=constant:abc", "-o", "o.png", "--size", "16x16", "-q"],
+        "constant:ANGLE",
+    ),
+    (
+        "flow file with nan",
+        ["synth", "-m", "grouplets", "--flow", "nan_flow.npy", "-o", "o.png", "-q"],
+        "NaN",
+    ),
     ("unknown method", ["synth", "-m", "nope", "-o", "o.png"], "unknown method 'nope'"),
     ("unknown command", ["frobnicate"], "frobnicate"),
     # inputs
@@ -193,7 +270,11 @@ def test_read_only_folder_is_refused_before_any_work(work, capsys, monkeypatch):
     fitted = []
     monkeypatch.setattr(RandomPhase, "_fit", lambda self, ex: fitted.append(1))
     before = snapshot(work)
-    for args in (["synth", "-o", "ro/o.png", *FAST], ["animate", "-o", "ro/a.gif", "-q"], ["compare", "-o", "ro/r.html", "-q"]):
+    for args in (
+        ["synth", "-o", "ro/o.png", *FAST],
+        ["animate", "-o", "ro/a.gif", "-q"],
+        ["compare", "-o", "ro/r.html", "-q"],
+    ):
         code, err = run(capsys, *args)
         check_one_line(code, err, 2, "is not writable")
     assert fitted == []
@@ -202,7 +283,9 @@ def test_read_only_folder_is_refused_before_any_work(work, capsys, monkeypatch):
 
 
 # ---------------------------------------------------------------------------- internal faults
-@pytest.mark.parametrize("error", [RuntimeError("boom"), ValueError("boom"), TypeError("boom"), KeyError("boom")])
+@pytest.mark.parametrize(
+    "error", [RuntimeError("boom"), ValueError("boom"), TypeError("boom"), KeyError("boom")]
+)
 def test_an_internal_error_is_exit_1_not_the_users_fault(work, capsys, monkeypatch, error):
     def broken(self, shape, rng, callback):
         raise error
@@ -242,7 +325,9 @@ def no_space(*args, **kwargs):
 def test_disk_full_on_the_second_output_leaves_no_output(work, capsys, monkeypatch):
     monkeypatch.setattr(writing, "_encode_array", no_space)
     before = snapshot(work)
-    code, err = run(capsys, "synth", "ex.png", "-o", "out.png", "--source-map", "where.npy", "-p", "patch_size=8", "-q")
+    code, err = run(
+        capsys, "synth", "ex.png", "-o", "out.png", "--source-map", "where.npy", "-p", "patch_size=8", "-q"
+    )
     check_one_line(code, err, 1, "cannot write 'where.npy': No space left on device")
     assert snapshot(work) == before  # neither out.png, nor its sidecar, nor a temporary
 
@@ -288,7 +373,9 @@ def test_an_interrupt_while_writing_removes_every_temporary(work, capsys, monkey
 
     monkeypatch.setattr(writing, "_encode_text", interrupted)
     before = snapshot(work)
-    code, err = run(capsys, "synth", "ex.png", "-o", "out.png", "--source-map", "where.npy", "-p", "patch_size=8", "-q")
+    code, err = run(
+        capsys, "synth", "ex.png", "-o", "out.png", "--source-map", "where.npy", "-p", "patch_size=8", "-q"
+    )
     assert code == 130 and err.strip() == "texsyn: interrupted"
     assert snapshot(work) == before
 
@@ -296,7 +383,9 @@ def test_an_interrupt_while_writing_removes_every_temporary(work, capsys, monkey
 def test_mp4_writer_failure_leaves_nothing(work, capsys, monkeypatch):
     monkeypatch.setattr(writing._FfmpegWriter, "close", no_space)
     before = snapshot(work)
-    code, err = run(capsys, "animate", "-o", "a.mp4", "--frames", "2", "--size", "16x16", "-q", "-p", "n_iterations=1")
+    code, err = run(
+        capsys, "animate", "-o", "a.mp4", "--frames", "2", "--size", "16x16", "-q", "-p", "n_iterations=1"
+    )
     check_one_line(code, err, 1, "cannot write 'a.mp4': No space left on device")
     assert snapshot(work) == before
 
@@ -304,7 +393,10 @@ def test_mp4_writer_failure_leaves_nothing(work, capsys, monkeypatch):
 @pytest.mark.parametrize(
     "script, message",
     [
-        ('cat > /dev/null\necho "av_interleaved_write_frame(): No space left on device" >&2\nexit 1', "No space left on device"),
+        (
+            'cat > /dev/null\necho "av_interleaved_write_frame(): No space left on device" >&2\nexit 1',
+            "No space left on device",
+        ),
         ('echo "Error opening output file: Permission denied" >&2\nexit 1', "Permission denied"),
         ("cat > /dev/null\nexit 0", "empty file"),  # ffmpeg says yes but wrote nothing
     ],
@@ -316,7 +408,9 @@ def test_ffmpeg_failures_are_reported(work, capsys, monkeypatch, tmp_path_factor
     fake.chmod(0o755)
     monkeypatch.setattr(writing, "_ffmpeg_exe", lambda: str(fake))
     before = snapshot(work)
-    code, err = run(capsys, "animate", "-o", "a.mp4", "--frames", "2", "--size", "16x16", "-q", "-p", "n_iterations=1")
+    code, err = run(
+        capsys, "animate", "-o", "a.mp4", "--frames", "2", "--size", "16x16", "-q", "-p", "n_iterations=1"
+    )
     check_one_line(code, err, 1, "cannot write 'a.mp4'")
     assert message in err
     assert snapshot(work) == before
@@ -327,7 +421,9 @@ def start_animation(folder: Path, output: str) -> subprocess.Popen:
     # like an interactive process even when the test runs where SIGINT is ignored (background jobs)
     code = "import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); from texsyn.cli import main; sys.exit(main())"
     args = ["animate", "builtin:brick", "-o", output, "--frames", "200", "--size", "64x64", "-q"]
-    return subprocess.Popen([sys.executable, "-c", code, *args], cwd=folder, stderr=subprocess.PIPE, text=True)
+    return subprocess.Popen(
+        [sys.executable, "-c", code, *args], cwd=folder, stderr=subprocess.PIPE, text=True
+    )
 
 
 def wait_for_temporary(folder: Path, prefix: str, proc: subprocess.Popen, timeout: float = 60.0) -> None:
@@ -342,7 +438,10 @@ def wait_for_temporary(folder: Path, prefix: str, proc: subprocess.Popen, timeou
 
 @pytest.mark.parametrize(
     "output, sig, status, line",
-    [("out.mp4", signal.SIGTERM, 143, "texsyn: terminated"), ("frames", signal.SIGINT, 130, "texsyn: interrupted")],
+    [
+        ("out.mp4", signal.SIGTERM, 143, "texsyn: terminated"),
+        ("frames", signal.SIGINT, 130, "texsyn: interrupted"),
+    ],
     ids=["mp4 SIGTERM", "frames SIGINT"],
 )
 def test_a_signal_during_animate_leaves_nothing_behind(tmp_path, output, sig, status, line):
@@ -362,10 +461,43 @@ def test_a_signal_during_animate_leaves_nothing_behind(tmp_path, output, sig, st
 
 # ---------------------------------------------------------------------------- fuzzing
 NASTY = [
-    "nan", "NaN", "-nan", "inf", "-inf", "Infinity", "1e400", "-1e400", "1e-400", "0", "-0", "-1", "1e308",
-    "", " ", "abc", "0x10", "1_0", "9" * 40, "١٢", "2x", "x2", "3x3x3", "1,2", "none", "true", "nan,1",
+    "nan",
+    "NaN",
+    "-nan",
+    "inf",
+    "-inf",
+    "Infinity",
+    "1e400",
+    "-1e400",
+    "1e-400",
+    "0",
+    "-0",
+    "-1",
+    "1e308",
+    "",
+    " ",
+    "abc",
+    "0x10",
+    "1_0",
+    "9" * 40,
+    "١٢",
+    "2x",
+    "x2",
+    "3x3x3",
+    "1,2",
+    "none",
+    "true",
+    "nan,1",
 ]
-OPTIONS = ["--scale", "--size", "--seed", "-p patch_size", "-p tolerance", "-p overlap", "-p periodic_component"]
+OPTIONS = [
+    "--scale",
+    "--size",
+    "--seed",
+    "-p patch_size",
+    "-p tolerance",
+    "-p overlap",
+    "-p periodic_component",
+]
 values = st.one_of(
     st.sampled_from(NASTY),
     st.floats(allow_nan=True, allow_infinity=True).map(repr),

@@ -27,7 +27,20 @@ def run(capsys, *args):
 
 def test_synth_writes_the_requested_size(tmp_path, exemplar_file, capsys):
     out = tmp_path / "out.png"
-    code, _, err = run(capsys, "synth", exemplar_file, "-o", out, "--size", "70x50", "--seed", "1", "-p", "patch_size=16", "-q")
+    code, _, err = run(
+        capsys,
+        "synth",
+        exemplar_file,
+        "-o",
+        out,
+        "--size",
+        "70x50",
+        "--seed",
+        "1",
+        "-p",
+        "patch_size=16",
+        "-q",
+    )
     assert code == 0, err
     assert read_image(out).shape == (50, 70)
     assert err == ""
@@ -43,14 +56,43 @@ def test_synth_defaults_to_twice_the_exemplar_and_same_seed_same_file(tmp_path, 
 
 def test_synth_scale_bit_depth_and_source_map(tmp_path, exemplar_file, capsys):
     out, src, pic = tmp_path / "o.tif", tmp_path / "src.npy", tmp_path / "src.png"
-    code, _, err = run(capsys, "synth", exemplar_file, "-o", out, "--scale", "0.75", "--bit-depth", "16", "-p", "patch_size=12", "--source-map", src, "-q")
+    code, _, err = run(
+        capsys,
+        "synth",
+        exemplar_file,
+        "-o",
+        out,
+        "--scale",
+        "0.75",
+        "--bit-depth",
+        "16",
+        "-p",
+        "patch_size=12",
+        "--source-map",
+        src,
+        "-q",
+    )
     assert code == 0, err
     img = read_image(out)
     assert img.shape == (36, 36)
     ex = read_image(exemplar_file)
     source = np.load(src)
     np.testing.assert_allclose(img, ex[source[..., 0], source[..., 1]], atol=1e-4)
-    assert run(capsys, "synth", exemplar_file, "-o", tmp_path / "o2.png", "--source-map", pic, "-q", "-p", "patch_size=12")[0] == 0
+    assert (
+        run(
+            capsys,
+            "synth",
+            exemplar_file,
+            "-o",
+            tmp_path / "o2.png",
+            "--source-map",
+            pic,
+            "-q",
+            "-p",
+            "patch_size=12",
+        )[0]
+        == 0
+    )
     assert read_image(pic).shape == (96, 96, 3)
 
 
@@ -113,7 +155,11 @@ BAD_INPUTS = [
     ("truncated png", lambda t: [truncated_png(t)], "cannot read"),
     ("1-pixel image", lambda t: [tiny_image(t)], "at least 2x2"),
     ("exemplar smaller than the patch", lambda t: [small_image(t)], "too small for method 'quilting'"),
-    ("window larger than exemplar", lambda t: [small_image(t), "-m", "efros_leung", "-p", "window_size=15"], "too small"),
+    (
+        "window larger than exemplar",
+        lambda t: [small_image(t), "-m", "efros_leung", "-p", "window_size=15"],
+        "too small",
+    ),
     ("unknown method", lambda t: ["-m", "nope"], "unknown method 'nope'"),
     ("unknown parameter", lambda t: ["-p", "bogus=1"], "unknown parameter 'bogus'"),
     ("out of range", lambda t: ["-p", "patch_size=-3"], "must be in [2, 1024], got -3"),
@@ -175,13 +221,30 @@ def test_no_arguments_prints_the_help(capsys):
 
 def test_synth_writes_a_sidecar_with_method_parameters_seed_and_command(tmp_path, exemplar_file, capsys):
     out, src = tmp_path / "out.png", tmp_path / "where.npy"
-    args = ["synth", exemplar_file, "-o", out, "--size", "40x32", "--seed", "11", "-p", "patch_size=12", "--source-map", src, "-q"]
+    args = [
+        "synth",
+        exemplar_file,
+        "-o",
+        out,
+        "--size",
+        "40x32",
+        "--seed",
+        "11",
+        "-p",
+        "patch_size=12",
+        "--source-map",
+        src,
+        "-q",
+    ]
     code, _, err = run(capsys, *args)
     assert code == 0, err
     side = json.loads((tmp_path / "out.png.json").read_text())
     assert side["texsyn_version"] == texsyn.__version__
     assert side["command"] == "synth" and side["method"] == "quilting"
-    assert side["params"] == {k: list(v) if isinstance(v, tuple) else v for k, v in texsyn.make_method("quilting", patch_size=12).get_params().items()}
+    assert side["params"] == {
+        k: list(v) if isinstance(v, tuple) else v
+        for k, v in texsyn.make_method("quilting", patch_size=12).get_params().items()
+    }
     assert side["seed"] == 11
     assert side["inputs"] == {"exemplar": str(exemplar_file)}
     assert side["outputs"] == {"image": str(out), "source_map": str(src), "sidecar": str(out) + ".json"}
@@ -208,8 +271,41 @@ def test_a_drawn_seed_is_printed_recorded_and_reproduces_the_texture(tmp_path, e
 
 def test_overwrite_replaces_the_output_and_its_sidecar(tmp_path, exemplar_file, capsys):
     out = tmp_path / "out.png"
-    assert run(capsys, "synth", exemplar_file, "-o", out, "--size", "20x20", "-m", "random_phase", "--seed", "1", "-q")[0] == 0
-    assert run(capsys, "synth", exemplar_file, "-o", out, "--size", "30x20", "-m", "random_phase", "--seed", "2", "-q", "--overwrite")[0] == 0
+    assert (
+        run(
+            capsys,
+            "synth",
+            exemplar_file,
+            "-o",
+            out,
+            "--size",
+            "20x20",
+            "-m",
+            "random_phase",
+            "--seed",
+            "1",
+            "-q",
+        )[0]
+        == 0
+    )
+    assert (
+        run(
+            capsys,
+            "synth",
+            exemplar_file,
+            "-o",
+            out,
+            "--size",
+            "30x20",
+            "-m",
+            "random_phase",
+            "--seed",
+            "2",
+            "-q",
+            "--overwrite",
+        )[0]
+        == 0
+    )
     assert read_image(out).shape == (20, 30)
     assert json.loads((tmp_path / "out.png.json").read_text())["seed"] == 2
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ex.png", "out.png", "out.png.json"]
@@ -217,14 +313,29 @@ def test_overwrite_replaces_the_output_and_its_sidecar(tmp_path, exemplar_file, 
 
 def test_modify_and_animate_write_sidecars(tmp_path, exemplar_file, capsys):
     out = tmp_path / "m.png"
-    code, _, err = run(capsys, "modify", exemplar_file, "-e", exemplar_file, "-o", out, "-q", "-p", "lle_points=64")
+    code, _, err = run(
+        capsys, "modify", exemplar_file, "-e", exemplar_file, "-o", out, "-q", "-p", "lle_points=64"
+    )
     assert code == 0, err
     side = json.loads((tmp_path / "m.png.json").read_text())
     assert side["method"] == "patch_wavelet" and side["seed"] is None
     assert side["inputs"] == {"input": str(exemplar_file), "exemplar": str(exemplar_file)}
     assert side["options"]["ratio"] == 0.5
     frames = tmp_path / "frames"
-    code, _, err = run(capsys, "animate", "builtin:brick", "-o", frames, "--frames", "2", "--size", "16x16", "-q", "-p", "n_iterations=1")
+    code, _, err = run(
+        capsys,
+        "animate",
+        "builtin:brick",
+        "-o",
+        frames,
+        "--frames",
+        "2",
+        "--size",
+        "16x16",
+        "-q",
+        "-p",
+        "n_iterations=1",
+    )
     assert code == 0, err
     side = json.loads((tmp_path / "frames.json").read_text())
     assert side["method"] == "grouplets" and isinstance(side["seed"], int)

@@ -75,7 +75,12 @@ def _openblas_kernels_to_force() -> list[str]:
 
 KERNELS = [None] + _openblas_kernels_to_force()
 THREADS = [None, 1, 2, 4]
-SETTINGS = [(kernel, threads) for kernel in KERNELS for threads in THREADS if kernel is None or threads in (None, 1, 2)]
+SETTINGS = [
+    (kernel, threads)
+    for kernel in KERNELS
+    for threads in THREADS
+    if kernel is None or threads in (None, 1, 2)
+]
 
 
 def _run(setting: tuple[str | None, int | None]) -> dict[str, str]:
@@ -117,13 +122,25 @@ def test_fixed_order_restores_the_callers_blas_threads():
     threadpoolctl = pytest.importorskip("threadpoolctl")
     from texsyn.ops.linalg import fixed_order
 
-    before = {i["filepath"]: i["num_threads"] for i in threadpoolctl.threadpool_info() if i["user_api"] == "blas"}
+    before = {
+        i["filepath"]: i["num_threads"] for i in threadpoolctl.threadpool_info() if i["user_api"] == "blas"
+    }
     with fixed_order():
-        inside = {i["filepath"]: i["num_threads"] for i in threadpoolctl.threadpool_info() if i["user_api"] == "blas"}
+        inside = {
+            i["filepath"]: i["num_threads"]
+            for i in threadpoolctl.threadpool_info()
+            if i["user_api"] == "blas"
+        }
         with fixed_order():
             pass
-        again = {i["filepath"]: i["num_threads"] for i in threadpoolctl.threadpool_info() if i["user_api"] == "blas"}
-    after = {i["filepath"]: i["num_threads"] for i in threadpoolctl.threadpool_info() if i["user_api"] == "blas"}
+        again = {
+            i["filepath"]: i["num_threads"]
+            for i in threadpoolctl.threadpool_info()
+            if i["user_api"] == "blas"
+        }
+    after = {
+        i["filepath"]: i["num_threads"] for i in threadpoolctl.threadpool_info() if i["user_api"] == "blas"
+    }
     assert set(inside.values()) <= {1} and again == inside
     assert after == before
 

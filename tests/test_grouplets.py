@@ -2,9 +2,9 @@
 
 import numpy as np
 import pytest
-from strength_utils import autocorrelation_gap
 
 import texsyn
+from strength_utils import autocorrelation_gap
 from texsyn.cli import main
 from texsyn.io import read_image
 from texsyn.ops.flow import association_fields, builtin_flow, orient_field, structure_tensor_orientation
@@ -269,7 +269,23 @@ def test_looped_animation_wraps_around_smoothly(oriented):
 @pytest.mark.parametrize("name", ["anim.gif", "anim.mp4", "frames"])
 def test_cli_animate_writes_videos_and_frame_folders(tmp_path, capsys, name):
     out = tmp_path / name
-    code = main(["animate", "builtin:brick", "-o", str(out), "--frames", "4", "--size", "32x24", "--seed", "1", "-q", "-p", "n_iterations=2"])
+    code = main(
+        [
+            "animate",
+            "builtin:brick",
+            "-o",
+            str(out),
+            "--frames",
+            "4",
+            "--size",
+            "32x24",
+            "--seed",
+            "1",
+            "-q",
+            "-p",
+            "n_iterations=2",
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 0, err
     if name == "frames":
@@ -282,7 +298,10 @@ def test_cli_animate_writes_videos_and_frame_folders(tmp_path, capsys, name):
         with iio2.get_reader(out) as reader:
             count = sum(1 for _ in reader)
         assert count == 4
-    assert sorted(p.name for p in tmp_path.iterdir()) == [name, name + ".json"]  # output, sidecar, no temporary
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        name,
+        name + ".json",
+    ]  # output, sidecar, no temporary
 
 
 @pytest.mark.parametrize(
@@ -307,7 +326,21 @@ def test_cli_synth_along_a_flow_file(tmp_path, capsys):
     flow = tmp_path / "flow.npy"
     np.save(flow, builtin_flow("vortex", (40, 48)))
     out = tmp_path / "out.png"
-    code = main(["synth", "builtin:brick", "-m", "grouplets", "--flow", str(flow), "-o", str(out), "-q", "-p", "n_iterations=2"])
+    code = main(
+        [
+            "synth",
+            "builtin:brick",
+            "-m",
+            "grouplets",
+            "--flow",
+            str(flow),
+            "-o",
+            str(out),
+            "-q",
+            "-p",
+            "n_iterations=2",
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     assert read_image(out).shape == (40, 48)
     code = main(["synth", "builtin:brick", "--flow", str(flow), "-o", str(tmp_path / "q.png"), "-q"])

@@ -101,7 +101,9 @@ def test_write_then_read(tmp_path, ext, depth):
     yy, xx = np.mgrid[:10, :14]
     img = np.random.default_rng(3).random((10, 14, 3)).astype(np.float32)
     if ext == "jpg":  # lossy: a smooth image
-        img = np.dstack([0.5 + 0.3 * np.sin(xx / 4 + c) * np.cos(yy / 5) for c in range(3)]).astype(np.float32)
+        img = np.dstack([0.5 + 0.3 * np.sin(xx / 4 + c) * np.cos(yy / 5) for c in range(3)]).astype(
+            np.float32
+        )
     path = write_image(tmp_path / f"o.{ext}", img, bit_depth=depth)
     back = read_image(path)
     tol = 0.08 if ext == "jpg" else (0.5 / 255 if depth == 8 else 0.5 / 65535) + 1e-7
@@ -149,13 +151,21 @@ def test_netpbm_family(tmp_path):
     for name in ("p1.pbm", "p4.pbm"):
         np.testing.assert_array_equal(read_image(tmp_path / name), bits.astype(np.float32))
     grey = np.random.default_rng(6).integers(0, 1001, (5, 7))
-    (tmp_path / "p2.pgm").write_bytes(b"P2 7 5 1000\n" + b"\n".join(b" ".join(b"%d" % v for v in row) for row in grey))
+    (tmp_path / "p2.pgm").write_bytes(
+        b"P2 7 5 1000\n" + b"\n".join(b" ".join(b"%d" % v for v in row) for row in grey)
+    )
     np.testing.assert_allclose(read_image(tmp_path / "p2.pgm"), grey / 1000.0, atol=1e-7)
     colour = np.random.default_rng(7).integers(0, 256, (5, 7, 3))
     (tmp_path / "p3.ppm").write_bytes(b"P3\n7 5\n255\n" + b" ".join(b"%d" % v for v in colour.ravel()))
     np.testing.assert_allclose(read_image(tmp_path / "p3.ppm"), colour / 255.0, atol=1e-7)
     header = read_image_header(tmp_path / "p2.pgm")
-    assert (header.width, header.height, header.channels, header.bit_depth, header.format) == (7, 5, 1, 10, "PNM")
+    assert (header.width, header.height, header.channels, header.bit_depth, header.format) == (
+        7,
+        5,
+        1,
+        10,
+        "PNM",
+    )
 
 
 def test_sixteen_bit_grey_alpha_png_and_colour_tiff(tmp_path):

@@ -87,7 +87,9 @@ def tiff_file(entries: dict[int, tuple[int, list[int]]], body: bytes) -> bytes:
             extra += data
         table += struct.pack("<HHI", tag, typ, len(values)) + field
     pad = b"\0" * (ifd_at - 8 - len(body))
-    return b"II*\0" + struct.pack("<I", ifd_at) + body + pad + struct.pack("<H", n) + table + b"\0" * 4 + extra
+    return (
+        b"II*\0" + struct.pack("<I", ifd_at) + body + pad + struct.pack("<H", n) + table + b"\0" * 4 + extra
+    )
 
 
 def tiff_image(width, height, samples, bits, compression, strip: bytes, photometric=None) -> bytes:
@@ -148,7 +150,8 @@ def _samples() -> dict[str, bytes]:
         "rgb.gif": _encode(im.convert("P"), "GIF"),
         "lossless.webp": _encode(Image.fromarray(rgba), "WEBP", lossless=True),
         "lossy.webp": _encode(im, "WEBP", quality=50),
-        "p1.pbm": b"P1\n# plain\n6 5\n" + b"\n".join(b" ".join(b"01"[v % 2 : v % 2 + 1] for v in row) for row in rgb[..., 0]),
+        "p1.pbm": b"P1\n# plain\n6 5\n"
+        + b"\n".join(b" ".join(b"01"[v % 2 : v % 2 + 1] for v in row) for row in rgb[..., 0]),
         "p2.pgm": b"P2 6 5 1000\n" + b" ".join(b"%d" % (v % 1001) for v in u16[..., 0].ravel()) + b"\n",
         "p3.ppm": b"P3\n6 5\n255\n" + b" ".join(b"%d" % v for v in rgb.ravel()) + b"\n",
         "p4.pbm": _encode(im.convert("1"), "PPM"),
@@ -285,7 +288,9 @@ def test_flipped_bytes(fuzz_dir, name, data):
 
 # --------------------------------------------------------------------------- lying headers
 
-SIDES = st.one_of(st.integers(0, 70), st.integers(0, 2**32 - 1), st.sampled_from([2**31 - 1, 2**31, 30000, 65535]))
+SIDES = st.one_of(
+    st.integers(0, 70), st.integers(0, 2**32 - 1), st.sampled_from([2**31 - 1, 2**31, 30000, 65535])
+)
 
 
 @FUZZ
@@ -470,10 +475,17 @@ def test_other_format_bombs_are_refused_on_their_header(tmp_path):
     cases = {
         "bomb.bmp": bmp_file(20000, 20000, 8, compression=1, body=bytes(64)),  # RLE
         "bomb.gif": b"GIF89a" + struct.pack("<HHBBB", 65535, 65535, 0, 0, 0) + b"," + bytes(20),
-        "bomb.webp": b"RIFF" + struct.pack("<I", 22) + b"WEBPVP8X" + struct.pack("<I", 10) + b"\0" * 4
+        "bomb.webp": b"RIFF"
+        + struct.pack("<I", 22)
+        + b"WEBPVP8X"
+        + struct.pack("<I", 10)
+        + b"\0" * 4
         + (16383).to_bytes(3, "little") * 2,
         "bomb.pgm": b"P5 100000 100000 255\n" + bytes(100),
-        "bomb.jpg": b"\xff\xd8\xff\xc0" + struct.pack(">HBHHB", 17, 8, 60000, 60000, 3) + bytes(9) + b"\xff\xd9",
+        "bomb.jpg": b"\xff\xd8\xff\xc0"
+        + struct.pack(">HBHHB", 17, 8, 60000, 60000, 3)
+        + bytes(9)
+        + b"\xff\xd9",
     }
     for name, content in cases.items():
         path = tmp_path / name
@@ -531,7 +543,11 @@ def test_memory_equivalent_of_the_budget(tmp_path, monkeypatch):
     wide = _png(tmp_path / "w.png", (30, 30, 4), np.uint16)  # 900 pixels, 21,600 bytes
     with pytest.raises(ImageTooLargeError, match=r"to decode.*TEXSYN_MAX_PIXELS"):
         read_image(wide)
-    assert read_image(_png(tmp_path / "n.png", (30, 30, 4)), keep_alpha=True).shape == (30, 30, 4)  # 8-bit: 18,000
+    assert read_image(_png(tmp_path / "n.png", (30, 30, 4)), keep_alpha=True).shape == (
+        30,
+        30,
+        4,
+    )  # 8-bit: 18,000
 
 
 def test_pillow_guard_does_not_answer(tmp_path, monkeypatch):
@@ -582,7 +598,11 @@ _CHILD = textwrap.dedent(
 def _run_cli(*args: str, env: dict | None = None) -> tuple[int, int, str]:
     """Run ``texsyn ARGS`` in a child, returning its exit status, peak RSS (MiB) and stderr."""
     done = subprocess.run(
-        [sys.executable, "-c", _CHILD, *args], capture_output=True, text=True, timeout=180, check=False,
+        [sys.executable, "-c", _CHILD, *args],
+        capture_output=True,
+        text=True,
+        timeout=180,
+        check=False,
         env=None if env is None else {**os.environ, **env},
     )
     assert done.returncode == 0, done.stderr
@@ -691,7 +711,9 @@ def test_cli_checks_the_memory_limit_from_the_header_before_decoding(tmp_path):
     big = tmp_path / "big.bmp"
     Image.fromarray(noise).save(big)
     out = tmp_path / "out.png"
-    code, peak_mib, stderr = _run_cli("synth", str(big), "-o", str(out), "-m", "patch_wavelet", env={"TEXSYN_MEMORY_LIMIT": "64M"})
+    code, peak_mib, stderr = _run_cli(
+        "synth", str(big), "-o", str(out), "-m", "patch_wavelet", env={"TEXSYN_MEMORY_LIMIT": "64M"}
+    )
     assert code == 2 and "TEXSYN_MEMORY_LIMIT" in stderr, stderr
     assert not out.exists()
     assert peak_mib < 300, f"peak RSS {peak_mib} MiB"

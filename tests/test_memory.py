@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 import texsyn
-from texsyn._validation import human_bytes, check_output_shape, memory_limit_bytes, parse_memory_size
+from conftest import FAST_PARAMS, fast_method
+from texsyn._validation import check_output_shape, human_bytes, memory_limit_bytes, parse_memory_size
 from texsyn.cli import main
 from texsyn.errors import InputError, MemoryLimitError
 from texsyn.models.patch_wavelet import PatchWaveletTransform
 from texsyn.transforms.patch_wavelet import planned_widths
-from conftest import FAST_PARAMS, fast_method
 
 VAR = "TEXSYN_MEMORY_LIMIT"
 
@@ -45,7 +45,27 @@ def test_memory_limit_accepts_sizes_with_suffixes(monkeypatch, text, expected):
 
 
 @pytest.mark.parametrize(
-    "text", ["1e400", "nan", "inf", "-inf", "-1G", "-5", "0", "0M", "abc", "12Q", "1K", "1000", "2000P", "1e30", "8 G B", "G", "1,5G", "0x10M"]
+    "text",
+    [
+        "1e400",
+        "nan",
+        "inf",
+        "-inf",
+        "-1G",
+        "-5",
+        "0",
+        "0M",
+        "abc",
+        "12Q",
+        "1K",
+        "1000",
+        "2000P",
+        "1e30",
+        "8 G B",
+        "G",
+        "1,5G",
+        "0x10M",
+    ],
 )
 def test_a_bad_memory_limit_is_one_line_naming_the_variable(monkeypatch, text):
     monkeypatch.setenv(VAR, text)
@@ -112,14 +132,28 @@ def test_estimates_grow_with_the_output_and_the_exemplar(method_name):
 
 def test_estimates_follow_the_parameters_that_keep_arrays():
     ex = (128, 128, 3)
-    assert texsyn.make_method("sparse", n_atoms=512).estimate_memory(ex) > texsyn.make_method("sparse", n_atoms=64).estimate_memory(ex)
-    assert texsyn.make_method("efros_leung", window_size=21).estimate_memory(ex) > texsyn.make_method("efros_leung", window_size=5).estimate_memory(ex)
-    assert texsyn.make_method("patch_wavelet", max_resolution=32).estimate_memory(ex) > texsyn.make_method("patch_wavelet", max_resolution=8).estimate_memory(ex)
+    assert texsyn.make_method("sparse", n_atoms=512).estimate_memory(ex) > texsyn.make_method(
+        "sparse", n_atoms=64
+    ).estimate_memory(ex)
+    assert texsyn.make_method("efros_leung", window_size=21).estimate_memory(ex) > texsyn.make_method(
+        "efros_leung", window_size=5
+    ).estimate_memory(ex)
+    assert texsyn.make_method("patch_wavelet", max_resolution=32).estimate_memory(ex) > texsyn.make_method(
+        "patch_wavelet", max_resolution=8
+    ).estimate_memory(ex)
     out = (512, 512)
-    assert texsyn.make_method("cwt", refine=True).estimate_memory(ex, out) > texsyn.make_method("cwt").estimate_memory(ex, out)
-    assert texsyn.make_method("heeger_bergen", n_orientations=8).estimate_memory(ex, out) > texsyn.make_method("heeger_bergen", n_orientations=2).estimate_memory(ex, out)
-    assert texsyn.make_method("grouplets", grouplet_levels=6).estimate_memory(ex, out) > texsyn.make_method("grouplets", grouplet_levels=2).estimate_memory(ex, out)
-    assert texsyn.make_method("wei_levoy", window=15).estimate_memory(ex) > texsyn.make_method("wei_levoy", window=5).estimate_memory(ex)
+    assert texsyn.make_method("cwt", refine=True).estimate_memory(ex, out) > texsyn.make_method(
+        "cwt"
+    ).estimate_memory(ex, out)
+    assert texsyn.make_method("heeger_bergen", n_orientations=8).estimate_memory(
+        ex, out
+    ) > texsyn.make_method("heeger_bergen", n_orientations=2).estimate_memory(ex, out)
+    assert texsyn.make_method("grouplets", grouplet_levels=6).estimate_memory(ex, out) > texsyn.make_method(
+        "grouplets", grouplet_levels=2
+    ).estimate_memory(ex, out)
+    assert texsyn.make_method("wei_levoy", window=15).estimate_memory(ex) > texsyn.make_method(
+        "wei_levoy", window=5
+    ).estimate_memory(ex)
 
 
 def test_memory_terms_name_their_parts(method_name):
@@ -221,7 +255,10 @@ def test_rectangular_transform_inverts_the_forward_transform(grey_exemplar, shap
     assert coefficients.top_level == levels
     assert coefficients.coarse.shape == (shape[0] >> levels, shape[1] >> levels, 2)
     assert coefficients.shape == shape
-    assert sum(d.shape[0] * d.shape[1] for d in coefficients.details.values()) == shape[0] * shape[1] - coefficients.coarse[..., 0].size
+    assert (
+        sum(d.shape[0] * d.shape[1] for d in coefficients.details.values())
+        == shape[0] * shape[1] - coefficients.coarse[..., 0].size
+    )
     assert coefficients.magnitudes().shape == shape
     rebuilt = transform.inverse(coefficients)
     assert rebuilt.shape == shape + (2,)
@@ -230,5 +267,7 @@ def test_rectangular_transform_inverts_the_forward_transform(grey_exemplar, shap
 
 def test_planned_widths_match_the_transform():
     for shape in [(40, 40), (333, 77), (128, 128), (9, 200), (16, 16)]:
-        transform = PatchWaveletTransform(np.random.default_rng(0).random(shape), exemplar_boundary="symmetric")
+        transform = PatchWaveletTransform(
+            np.random.default_rng(0).random(shape), exemplar_boundary="symmetric"
+        )
         assert planned_widths(shape) == transform.widths()

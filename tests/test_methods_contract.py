@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import texsyn
-from texsyn._validation import OneOf
 from conftest import FAST_PARAMS, fast_method
+from texsyn._validation import OneOf
 
 
 def fitted(name, exemplar):
@@ -79,7 +79,9 @@ def test_source_map_names_exemplar_pixels(method_name, colour_exemplar):
     if type(method).source_map_exact:
         np.testing.assert_array_equal(result.image, copied.astype(np.float32))
     else:  # coefficients were copied, pixels re-synthesised: close to the named pixels
-        assert np.mean(np.abs(result.image - copied)) < 0.25 * np.mean(np.abs(colour_exemplar - colour_exemplar.mean()))
+        assert np.mean(np.abs(result.image - copied)) < 0.25 * np.mean(
+            np.abs(colour_exemplar - colour_exemplar.mean())
+        )
 
 
 def test_every_parameter_has_a_default_and_a_description(method_name):
@@ -122,7 +124,11 @@ def test_bad_exemplars_are_rejected(method_name, bad, error, match):
 
 
 def test_exemplar_smaller_than_the_window_is_rejected():
-    for name, params in [("quilting", {"patch_size": 32}), ("efros_leung", {"window_size": 11}), ("heeger_bergen", {})]:
+    for name, params in [
+        ("quilting", {"patch_size": 32}),
+        ("efros_leung", {"window_size": 11}),
+        ("heeger_bergen", {}),
+    ]:
         with pytest.raises(ValueError, match="too small"):
             texsyn.make_method(name, **params).fit(np.zeros((10, 10)))
 

@@ -45,7 +45,9 @@ def test_conditional_sampler_equals_the_textbook_formula(sigma):
     values = rng.random(known.sum())
     cmean, ccov = textbook_conditional(gauss.mean, gauss.factor @ gauss.factor.T, known, values, sigma)
     np.testing.assert_allclose(gauss.conditional(known, values, sigma, None), cmean, atol=1e-10)
-    draws = np.array([gauss.conditional(known, values, sigma, g) for g in np.random.default_rng(2).spawn(20000)])
+    draws = np.array(
+        [gauss.conditional(known, values, sigma, g) for g in np.random.default_rng(2).spawn(20000)]
+    )
     assert np.linalg.norm(np.cov(draws, rowvar=False) - ccov) / np.linalg.norm(ccov) < 0.05
     assert np.abs(draws.mean(axis=0) - cmean).max() < 0.03
 
@@ -151,14 +153,18 @@ def test_more_neighbours_give_a_smoother_result():
     ex = texsyn.data.exemplar("gravel", size=96)
     # the most probable patches (mode='mean') average more neighbours: steadily smoother
     energies = [
-        gradient_energy(texsyn.synthesize(ex, "lg", (96, 96), rng=2, patch_size=16, n_neighbors=m, mode="mean"))
+        gradient_energy(
+            texsyn.synthesize(ex, "lg", (96, 96), rng=2, patch_size=16, n_neighbors=m, mode="mean")
+        )
         for m in (10, 50, 150)
     ]
     assert energies[0] > 2 * energies[1] > 2 * 1.2 * energies[2]
     # sampled patches in the paper's setting (Fig. 10: n = 40, o = 0.5, m = 10, 50, 150)
     ex = texsyn.data.exemplar("grass", size=128)
     sampled = [
-        np.mean([gradient_energy(texsyn.synthesize(ex, "lg", (128, 128), rng=s, n_neighbors=m)) for s in range(2)])
+        np.mean(
+            [gradient_energy(texsyn.synthesize(ex, "lg", (128, 128), rng=s, n_neighbors=m)) for s in range(2)]
+        )
         for m in (10, 50, 150)
     ]
     assert sampled[0] > sampled[1] > sampled[2]
@@ -199,7 +205,9 @@ def test_multiscale_reproduces_the_brick_period_that_one_scale_loses():
     for k in (1, 3):
         values = [
             period_strength(
-                texsyn.synthesize(ex, "mslg", (128, 128), rng=seed, patch_size=10, n_neighbors=20, n_scales=k),
+                texsyn.synthesize(
+                    ex, "mslg", (128, 128), rng=seed, patch_size=10, n_neighbors=20, n_scales=k
+                ),
                 axis,
                 lag,
             )

@@ -43,7 +43,9 @@ def test_random_phase_larger_output_keeps_mean_and_variance(grey_exemplar):
 
 @pytest.mark.method("heeger_bergen")
 def test_heeger_bergen_output_histogram_equals_the_exemplars(grey_exemplar):
-    out = texsyn.synthesize(grey_exemplar, "heeger_bergen", grey_exemplar.shape, rng=0, n_iterations=2, n_scales=3)
+    out = texsyn.synthesize(
+        grey_exemplar, "heeger_bergen", grey_exemplar.shape, rng=0, n_iterations=2, n_scales=3
+    )
     np.testing.assert_allclose(np.sort(out, axis=None), np.sort(grey_exemplar, axis=None), atol=1e-7)
 
 
@@ -105,15 +107,26 @@ def test_quilting_copies_whole_blocks_with_cut_seams(grey_exemplar):
 
 def block_cells_with_one_source(result, step):
     """Whether each ``step x step`` cell of the block grid was copied from one block (one offset)."""
-    offset = result.source_map.astype(int) - np.stack(np.mgrid[: result.image.shape[0], : result.image.shape[1]], axis=-1)
-    return [len({tuple(v) for v in offset[y : y + step, x : x + step].reshape(-1, 2)}) == 1
-            for y in range(0, offset.shape[0], step) for x in range(0, offset.shape[1], step)]
+    offset = result.source_map.astype(int) - np.stack(
+        np.mgrid[: result.image.shape[0], : result.image.shape[1]], axis=-1
+    )
+    return [
+        len({tuple(v) for v in offset[y : y + step, x : x + step].reshape(-1, 2)}) == 1
+        for y in range(0, offset.shape[0], step)
+        for x in range(0, offset.shape[1], step)
+    ]
 
 
 @pytest.mark.method("quilting")
 def test_quilting_without_cut_overwrites_overlaps(grey_exemplar):
-    with_cut = texsyn.make_method("quilting", patch_size=16).fit(grey_exemplar).sample_with_map((40, 40), rng=5)
-    without = texsyn.make_method("quilting", patch_size=16, boundary_cut=False).fit(grey_exemplar).sample_with_map((40, 40), rng=5)
+    with_cut = (
+        texsyn.make_method("quilting", patch_size=16).fit(grey_exemplar).sample_with_map((40, 40), rng=5)
+    )
+    without = (
+        texsyn.make_method("quilting", patch_size=16, boundary_cut=False)
+        .fit(grey_exemplar)
+        .sample_with_map((40, 40), rng=5)
+    )
     step = 16 - 16 // 6  # blocks every 14 pixels; the next blocks overwrite the last 2 rows/columns
     # without the cut, each block is pasted whole over the overlap: straight seams on the grid
     assert all(block_cells_with_one_source(without, step))

@@ -43,8 +43,13 @@ def test_every_level_copies_the_blocks_named_by_the_source_cells():
     # level 1: the 4x4 block of output cell (i, j) is the 4x4 block of its source cell
     i, j = 3, 5
     a, b = cells[i, j]
-    np.testing.assert_array_equal(out.highpasses[0][4 * i : 4 * i + 4, 4 * j : 4 * j + 4], pyr.highpasses[0][4 * a : 4 * a + 4, 4 * b : 4 * b + 4])
-    np.testing.assert_array_equal(out.lowpass[2 * i : 2 * i + 2, 2 * j : 2 * j + 2], pyr.lowpass[2 * a : 2 * a + 2, 2 * b : 2 * b + 2])
+    np.testing.assert_array_equal(
+        out.highpasses[0][4 * i : 4 * i + 4, 4 * j : 4 * j + 4],
+        pyr.highpasses[0][4 * a : 4 * a + 4, 4 * b : 4 * b + 4],
+    )
+    np.testing.assert_array_equal(
+        out.lowpass[2 * i : 2 * i + 2, 2 * j : 2 * j + 2], pyr.lowpass[2 * a : 2 * a + 2, 2 * b : 2 * b + 2]
+    )
     assert cells.min() >= 0
 
 
@@ -97,7 +102,9 @@ def test_level_3_reproduces_words_where_pixel_sampling_grows_fragments():
     cwt = texsyn.make_method("cwt").fit(ex).sample_with_map((128, 128), rng=0)
     # the paper's pixel-domain baseline with the same seed (the whole exemplar at the centre)
     pixel = NonParametricSampler(np.pad(ex, 2), 5)
-    _, source = grow_pixels(pixel, (128, 128), max_error=np.inf, seed_block=(2, 2, 96, 96), rng=np.random.default_rng(0))
+    _, source = grow_pixels(
+        pixel, (128, 128), max_error=np.inf, seed_block=(2, 2, 96, 96), rng=np.random.default_rng(0)
+    )
     seed = np.zeros((128, 128), dtype=bool)
     seed[16:112, 16:112] = True
     words = mean_region_area_outside(cwt.source_map, seed)
@@ -117,7 +124,11 @@ def test_refinement_changes_the_fine_levels_only_locally():
 def test_wei_levoy_tsvq_with_one_leaf_is_the_exact_search():
     ex = texsyn.data.exemplar("gravel", size=32)
     exact = texsyn.make_method("wei_levoy", levels=2, window=5).fit(ex).sample((24, 24), rng=0)
-    tree = texsyn.make_method("wei_levoy", levels=2, window=5, search="tsvq", leaf_size=4096).fit(ex).sample((24, 24), rng=0)
+    tree = (
+        texsyn.make_method("wei_levoy", levels=2, window=5, search="tsvq", leaf_size=4096)
+        .fit(ex)
+        .sample((24, 24), rng=0)
+    )
     np.testing.assert_array_equal(exact, tree)
     approx = texsyn.make_method("wei_levoy", levels=2, window=5, search="tsvq", leaf_size=8).fit(ex)
     result = approx.sample_with_map((24, 24), rng=0)

@@ -17,18 +17,18 @@ import warnings
 
 import numpy as np
 import pytest
-from conftest import FAST_PARAMS
 from scipy import ndimage
 
 import texsyn
+from conftest import FAST_PARAMS
 from texsyn.errors import InputError
-from texsyn.ops.sparse import box_power as _box_power, image_energy
 from texsyn.methods.wavelet_sampling import block_indices
 from texsyn.ops import HistogramMatcher, extract_patches
 from texsyn.ops.color import ColorPCA
 from texsyn.ops.flow import builtin_flow, structure_tensor_orientation
 from texsyn.ops.fluid import rescale_speed
-from texsyn.ops.sparse import batch_omp, ksvd
+from texsyn.ops.sparse import batch_omp, image_energy, ksvd
+from texsyn.ops.sparse import box_power as _box_power
 
 
 # ----------------------------------------------------------------------------- sparse
@@ -58,7 +58,9 @@ def energy_setup():
     power = _box_power((16, 16), tau)
 
     def energy(alpha, beta):
-        return image_energy(u, coded, tau, step, projector, alpha=alpha, beta=beta, box_power=power, reference=reference)
+        return image_energy(
+            u, coded, tau, step, projector, alpha=alpha, beta=beta, box_power=power, reference=reference
+        )
 
     return u, reference, tau, projector, energy
 
@@ -71,8 +73,9 @@ def test_sparse_energy_data_term_of_another_images_patches_is_the_pixel_distance
     tau, step = 4, 2
     coded, _ = extract_patches(v, tau, stride=step, mode="periodic")
     projector = HistogramMatcher([np.sort(rng.random(256))], 256)
-    energy = image_energy(u, coded, tau, step, projector, alpha=0.0, beta=0.0,
-                          box_power=_box_power((16, 16), tau), reference=v)
+    energy = image_energy(
+        u, coded, tau, step, projector, alpha=0.0, beta=0.0, box_power=_box_power((16, 16), tau), reference=v
+    )
     np.testing.assert_allclose(energy, np.sum((u - v) ** 2), rtol=1e-10)
 
 
@@ -188,7 +191,12 @@ def test_builtin_sources_flow_leaves_its_sources_and_turns_around_its_vortices()
     h, w = 64, 48
     field = builtin_flow("sources", (h, w))
     assert field.shape == (h, w, 2)
-    for cr, cc, kind in ((0.25, 0.25, "source"), (0.75, 0.75, "source"), (0.25, 0.75, "vortex"), (0.75, 0.25, "vortex")):
+    for cr, cc, kind in (
+        (0.25, 0.25, "source"),
+        (0.75, 0.75, "source"),
+        (0.25, 0.75, "vortex"),
+        (0.75, 0.25, "vortex"),
+    ):
         radial, tangential = radial_and_tangential(field, (cr * h, cc * w))
         if kind == "source":
             assert radial.min() > 0.99, (cr, cc)
@@ -221,8 +229,15 @@ def test_builtin_vortex_flow_turns_about_the_centre_pixel():
     np.testing.assert_allclose(np.hypot(field[..., 0], field[..., 1]), np.hypot(dr, dc))
 
 
-@pytest.mark.parametrize("name, direction", [("constant", (0.0, 1.0)), ("constant:90", (-1.0, 0.0)),
-                                             ("Constant:180 ", (0.0, -1.0)), ("constant:-90", (1.0, 0.0))])
+@pytest.mark.parametrize(
+    "name, direction",
+    [
+        ("constant", (0.0, 1.0)),
+        ("constant:90", (-1.0, 0.0)),
+        ("Constant:180 ", (0.0, -1.0)),
+        ("constant:-90", (1.0, 0.0)),
+    ],
+)
 def test_builtin_constant_flow_points_at_its_angle(name, direction):
     """'constant:ANGLE': ANGLE degrees counter-clockwise from the +column axis (rows go down)."""
     field = builtin_flow(name, (5, 7))
@@ -249,14 +264,21 @@ def test_looped_animation_is_the_simulation_shifted_with_a_crossfade_back_to_its
     weights = []
     for k, f in enumerate(looped[n - m :]):
         assert f.image.shape == shape
-        for got, a, b in ((f.image, simulated[n + k].image, simulated[k].image), (f.flow, simulated[n + k].flow, simulated[k].flow)):
+        for got, a, b in (
+            (f.image, simulated[n + k].image, simulated[k].image),
+            (f.flow, simulated[n + k].flow, simulated[k].flow),
+        ):
             a, b, got = (np.asarray(x, dtype=np.float64) for x in (a, b, got))
             w = np.sum((got - a) * (b - a)) / np.sum((b - a) ** 2)
             np.testing.assert_allclose(got, a + w * (b - a), atol=1e-5)
             weights.append(w)
     image_weights = weights[0::2]
     np.testing.assert_allclose(weights[1::2], image_weights, atol=1e-6)  # image and flow blend alike
-    assert 0 < image_weights[0] and all(x < y for x, y in itertools.pairwise(image_weights)) and image_weights[-1] < 1
+    assert (
+        0 < image_weights[0]
+        and all(x < y for x, y in itertools.pairwise(image_weights))
+        and image_weights[-1] < 1
+    )
 
 
 def test_rescale_speed_sets_the_rms_speed_and_leaves_a_still_flow_still():
@@ -308,7 +330,9 @@ def test_grouplets_sigma_sets_the_structure_tensor_smoothing_of_the_model():
     exemplar = np.random.default_rng(4).random((32, 32))
     coherence = {}
     for sigma in (1.0, 8.0):
-        method = texsyn.make_method("grouplets", colour="grey", sigma=sigma, **FAST_PARAMS["grouplets"]).fit(exemplar)
+        method = texsyn.make_method("grouplets", colour="grey", sigma=sigma, **FAST_PARAMS["grouplets"]).fit(
+            exemplar
+        )
         periodic = periodic_smooth_decomposition(exemplar.astype(np.float64))[0]
         _, expected = structure_tensor_orientation(periodic, sigma=sigma, presmooth=1.0)
         np.testing.assert_allclose(method.model_.coherence, expected, atol=1e-9)
@@ -326,9 +350,13 @@ def test_orient_field_takes_the_sign_of_its_start_vector():
     signs[0, 0], signs[6, 5] = 1.0, -1.0  # (6, 5) is the centre, the default start
     direction = np.array([0.6, 0.8])
     orientation = signs[..., None] * direction
-    np.testing.assert_allclose(orient_field(orientation, start=(0, 0)), np.broadcast_to(direction, orientation.shape))
+    np.testing.assert_allclose(
+        orient_field(orientation, start=(0, 0)), np.broadcast_to(direction, orientation.shape)
+    )
     np.testing.assert_allclose(orient_field(orientation), np.broadcast_to(-direction, orientation.shape))
-    np.testing.assert_allclose(orient_field(orientation, start=(6, 5)), np.broadcast_to(-direction, orientation.shape))
+    np.testing.assert_allclose(
+        orient_field(orientation, start=(6, 5)), np.broadcast_to(-direction, orientation.shape)
+    )
 
 
 def test_grouplets_random_initial_flow_is_periodic():
@@ -354,7 +382,9 @@ def test_patch_wavelet_random_state_seeds_the_embedding():
     exemplar = texsyn.data.exemplar("brick", size=40)  # 1600 positions: ARPACK
 
     def embedding(state):
-        return texsyn.make_method("patch_wavelet", random_state=state).fit(exemplar).transform_.embedding(8)[0]
+        return (
+            texsyn.make_method("patch_wavelet", random_state=state).fit(exemplar).transform_.embedding(8)[0]
+        )
 
     first, again, other = embedding(0), embedding(0), embedding(1)
     np.testing.assert_array_equal(first, again)
@@ -368,7 +398,11 @@ def test_patch_wavelet_max_resolution_sets_the_block_means_of_wide_windows():
     from texsyn.models.patch_wavelet import ExemplarWindows
 
     exemplar = texsyn.data.exemplar("brick", size=32)
-    transform = texsyn.make_method("patch_wavelet", max_resolution=4, exemplar_boundary="periodic").fit(exemplar).transform_
+    transform = (
+        texsyn.make_method("patch_wavelet", max_resolution=4, exemplar_boundary="periodic")
+        .fit(exemplar)
+        .transform_
+    )
     assert transform.windows.dimension(8) == 16
     rows, cols = np.array([0, 5, 31]), np.array([3, 17, 30])
     coarse = transform.windows.descriptors(rows, cols, 8)
@@ -386,7 +420,9 @@ def test_patch_wavelet_window_width_doubles_per_level_between_its_bounds(min_wid
     """Level j uses ``clamp(2^j, min_width, max_width)``, max_width at most half the exemplar."""
     from texsyn.models.patch_wavelet import PatchWaveletTransform
 
-    transform = PatchWaveletTransform(texsyn.data.exemplar("brick", size=64), min_width=min_width, max_width=max_width)
+    transform = PatchWaveletTransform(
+        texsyn.data.exemplar("brick", size=64), min_width=min_width, max_width=max_width
+    )
     assert [transform.width(level) for level in range(1, 7)] == expected
 
 

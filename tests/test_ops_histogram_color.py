@@ -41,7 +41,10 @@ def test_ot_target_for_unequal_sizes():
     # the OT target minimises the transport energy among monotone rearrangements
     x = rng.random(37)
     matched = match_sorted(x, t)
-    assert transport_energy(matched, y) <= transport_energy(match_sorted(x, hist_target(37, y, method="interp")), y) + 1e-12
+    assert (
+        transport_energy(matched, y)
+        <= transport_energy(match_sorted(x, hist_target(37, y, method="interp")), y) + 1e-12
+    )
 
 
 def test_transport_energy_equal_sizes_is_sorted_ssd():

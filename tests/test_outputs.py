@@ -45,7 +45,11 @@ def test_a_committed_set_writes_everything_with_normal_permissions(tmp_path):
         outputs.write_frames(frames, (np.zeros((4, 4)) for _ in range(3)))
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.png", "a.png.json", "frames"]
     assert read_image(image).shape == (4, 5)
-    assert sorted(p.name for p in frames.iterdir()) == ["frame_00000.png", "frame_00001.png", "frame_00002.png"]
+    assert sorted(p.name for p in frames.iterdir()) == [
+        "frame_00000.png",
+        "frame_00001.png",
+        "frame_00002.png",
+    ]
     umask = os.umask(0)
     os.umask(umask)
     assert stat.S_IMODE(image.stat().st_mode) == 0o666 & ~umask
@@ -98,7 +102,21 @@ def test_single_file_writers_overwrite_by_default_and_refuse_on_request(tmp_path
 def test_frame_folders_empty_or_replaced_only_with_overwrite(tmp_path, capsys):
     frames = tmp_path / "frames"
     frames.mkdir()  # an existing empty folder receives the frames without --overwrite
-    args = ["animate", "builtin:brick", "-o", str(frames), "--frames", "2", "--size", "16x16", "-q", "-p", "n_iterations=1", "--seed", "1"]
+    args = [
+        "animate",
+        "builtin:brick",
+        "-o",
+        str(frames),
+        "--frames",
+        "2",
+        "--size",
+        "16x16",
+        "-q",
+        "-p",
+        "n_iterations=1",
+        "--seed",
+        "1",
+    ]
     assert main(args) == 0, capsys.readouterr().err
     assert sorted(p.name for p in frames.iterdir()) == ["frame_00000.png", "frame_00001.png"]
     assert main(args) == 2 and "already exists" in capsys.readouterr().err

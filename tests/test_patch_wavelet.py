@@ -2,17 +2,17 @@
 
 import numpy as np
 import pytest
-from strength_utils import coherent_fraction
 
 import texsyn
+from strength_utils import coherent_fraction
 from texsyn.cli import main
 from texsyn.io import read_image
-from texsyn.ops import NearestPatchIndex, extend_index, knn_patches, wrap_seam_ratio
 from texsyn.models.patch_wavelet import (
     ExemplarWindows,
     PatchWaveletTransform,
     lle_embedding,
 )
+from texsyn.ops import NearestPatchIndex, extend_index, knn_patches, wrap_seam_ratio
 
 
 @pytest.fixture(scope="module")
@@ -97,7 +97,13 @@ def test_mean_descriptor_glues_the_two_continuations(axis, width, s):
     e[axis] = s
     first = brute_window(image, ta[0] + e, width, "symmetric")
     second = brute_window(image, tb[0] - e, width, "symmetric")
-    glued = np.where((np.arange(width) < width // 2)[:, None, None] if axis == 0 else (np.arange(width) < width // 2)[None, :, None], first, second)
+    glued = np.where(
+        (np.arange(width) < width // 2)[:, None, None]
+        if axis == 0
+        else (np.arange(width) < width // 2)[None, :, None],
+        first,
+        second,
+    )
     np.testing.assert_allclose(got, block_average(glued, min(width, 8)).ravel(), atol=1e-12)
 
 
@@ -277,7 +283,25 @@ def test_equalisation_matches_the_inputs_colours(brick):
 def test_cli_modify_writes_the_texture_and_the_magnitudes(tmp_path, capsys):
     out, mags = tmp_path / "m.png", tmp_path / "mag.npy"
     where = tmp_path / "where.npy"
-    code = main(["modify", "builtin:gravel", "-e", "builtin:brick", "-r", "0.2", "-o", str(out), "--magnitudes", str(mags), "--source-map", str(where), "-q", "-p", "lle_points=256"])
+    code = main(
+        [
+            "modify",
+            "builtin:gravel",
+            "-e",
+            "builtin:brick",
+            "-r",
+            "0.2",
+            "-o",
+            str(out),
+            "--magnitudes",
+            str(mags),
+            "--source-map",
+            str(where),
+            "-q",
+            "-p",
+            "lle_points=256",
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 0, err
     assert read_image(out).shape == (128, 128)

@@ -26,7 +26,9 @@ def test_complex_pyramid_reconstructs_exactly(shape, single):
     highpass, bands, lows = pyramid.forward(image)
     low = pyramid.lowpass_image(lows[-1])
     for s in range(2, -1, -1):
-        np.testing.assert_allclose(pyramid.analytic(bands[s].real, s)[0], bands[s], atol=1e-5 if single else 1e-12)
+        np.testing.assert_allclose(
+            pyramid.analytic(bands[s].real, s)[0], bands[s], atol=1e-5 if single else 1e-12
+        )
         low = pyramid.reconstruct_level(low, bands[s].real, s)
         # the partially reconstructed image is the level's low-pass image filtered by L(r/2)
         expected = np.fft.ifft2(np.fft.fft2(lows[s]) * pyramid.mid[s]).real
@@ -85,7 +87,9 @@ def test_autocorrelation_is_pulled_toward_its_target():
 def test_synthesis_brings_the_statistics_close_to_the_exemplars():
     exemplar = texsyn.data.exemplar("brick", size=64)
     method = texsyn.make_method("portilla_simoncelli", n_scales=3, n_iterations=15).fit(exemplar)
-    noise = np.clip(exemplar.mean() + exemplar.std() * np.random.default_rng(0).standard_normal((96, 96)), 0, 1)
+    noise = np.clip(
+        exemplar.mean() + exemplar.std() * np.random.default_rng(0).standard_normal((96, 96)), 0, 1
+    )
     out = method.sample((96, 96), rng=0)
     d_noise, d_out = ps_distance(noise, exemplar, n_scales=3), ps_distance(out, exemplar, n_scales=3)
     assert d_out < d_noise / 5
@@ -96,7 +100,9 @@ def test_synthesis_brings_the_statistics_close_to_the_exemplars():
 
 @pytest.mark.method("portilla_simoncelli")
 def test_colour_keeps_the_exemplars_channel_covariance(colour_exemplar):
-    out = texsyn.synthesize(colour_exemplar, "portilla_simoncelli", (48, 56), rng=1, n_scales=2, n_iterations=8)
+    out = texsyn.synthesize(
+        colour_exemplar, "portilla_simoncelli", (48, 56), rng=1, n_scales=2, n_iterations=8
+    )
     assert out.shape == (48, 56, 3)
     c_ex = np.cov(colour_exemplar.reshape(-1, 3).T)
     c_out = np.cov(out.reshape(-1, 3).T)
@@ -137,7 +143,9 @@ def test_mslg_post_processing_moves_toward_the_exemplar_statistics():
     exemplar = texsyn.data.exemplar("brick", size=64)
     params = dict(patch_size=8, n_neighbors=8, n_scales=2)
     plain = texsyn.synthesize(exemplar, "mslg", (64, 64), rng=2, **params)
-    post = texsyn.synthesize(exemplar, "mslg", (64, 64), rng=2, post="portilla_simoncelli", post_iterations=8, **params)
+    post = texsyn.synthesize(
+        exemplar, "mslg", (64, 64), rng=2, post="portilla_simoncelli", post_iterations=8, **params
+    )
     assert not np.array_equal(plain, post)
     assert ps_distance(post, exemplar, n_scales=3) < ps_distance(plain, exemplar, n_scales=3)
 
@@ -159,14 +167,26 @@ def test_agrees_with_plenoptic_when_installed():
     image = texsyn.data.exemplar("brick", size=64).astype(np.float64)
     models = getattr(plenoptic, "models", None) or plenoptic.simulate  # plenoptic 2.x / 1.x
     model = models.PortillaSimoncelli(image.shape, n_scales=3, n_orientations=4, spatial_corr_width=7)
-    theirs = {k: v.squeeze().numpy() for k, v in model.convert_to_dict(model(torch.tensor(image)[None, None])).items()}
+    theirs = {
+        k: v.squeeze().numpy()
+        for k, v in model.convert_to_dict(model(torch.tensor(image)[None, None])).items()
+    }
     ours = ps_statistics(image, n_scales=3)
     close = lambda a, b: np.testing.assert_allclose(a, b, rtol=1e-4, atol=1e-5)  # noqa: E731  (plenoptic filters are float32)
 
     n = image.size
     mean, var, skew, kurt = ours.pixel_moments[0]
     corrected = var * n / (n - 1)
-    close(theirs["pixel_statistics"], [mean, corrected, skew * (var / corrected) ** 1.5, kurt * (var / corrected) ** 2, *ours.pixel_range[0]])
+    close(
+        theirs["pixel_statistics"],
+        [
+            mean,
+            corrected,
+            skew * (var / corrected) ** 1.5,
+            kurt * (var / corrected) ** 2,
+            *ours.pixel_range[0],
+        ],
+    )
     close(theirs["skew_reconstructed"], ours.low_skew_kurt[0, :, 0])
     close(theirs["kurtosis_reconstructed"], ours.low_skew_kurt[0, :, 1])
     close(theirs["var_highpass_residual"], ours.highpass_variance[0])
@@ -192,8 +212,13 @@ def test_agrees_with_plenoptic_when_installed():
         if level < 2:
             mags, reals = parent_features(pyramid, spectra, lows, level)
             parent_var = np.mean(mags**2, axis=0)
-            close(theirs["cross_scale_correlation_magnitude"][..., level], ours.magnitude_parent[level] / np.sqrt(np.outer(variances, parent_var)))
+            close(
+                theirs["cross_scale_correlation_magnitude"][..., level],
+                ours.magnitude_parent[level] / np.sqrt(np.outer(variances, parent_var)),
+            )
             child = bands[level][0].real.reshape(4, -1)
-            real_corr = ours.real_parent[level] / np.sqrt(np.outer(np.mean(child**2, axis=1), np.mean(reals**2, axis=0)))
+            real_corr = ours.real_parent[level] / np.sqrt(
+                np.outer(np.mean(child**2, axis=1), np.mean(reals**2, axis=0))
+            )
             real_corr[:, :4] *= -1
             close(theirs["cross_scale_correlation_real"][..., level], real_corr)

@@ -8,9 +8,9 @@ import subprocess
 import pytest
 
 import texsyn
+from conftest import FAST_PARAMS
 from texsyn.cli import main
 from texsyn.report import run_comparison, write_report
-from conftest import FAST_PARAMS
 
 
 @pytest.fixture(scope="module")
@@ -64,7 +64,21 @@ def test_a_failing_method_is_reported_and_the_others_still_run():
 
 def test_compare_command(tmp_path, capsys):
     out = tmp_path / "cmp.html"
-    args = ["compare", "builtin:grass", "-o", str(out), "-m", "quilting", "-m", "random_phase", "--size", "48x40", "-p", "quilting.patch_size=16", "-q"]
+    args = [
+        "compare",
+        "builtin:grass",
+        "-o",
+        str(out),
+        "-m",
+        "quilting",
+        "-m",
+        "random_phase",
+        "--size",
+        "48x40",
+        "-p",
+        "quilting.patch_size=16",
+        "-q",
+    ]
     assert main(args) == 0
     data = json.loads(out.with_suffix(".json").read_text())
     assert [m["method"] for m in data["methods"]] == ["quilting", "random_phase"]
@@ -100,13 +114,23 @@ def find_chromium():
 
 def chromium_args(binary, tmp_path):
     return [
-        binary, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-        "--disable-background-networking", "--disable-component-update", "--disable-sync",
-        f"--user-data-dir={tmp_path / 'profile'}", "--virtual-time-budget=5000",
+        binary,
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-quic",
+        "--no-first-run",
+        "--disable-background-networking",
+        "--disable-component-update",
+        "--disable-sync",
+        f"--user-data-dir={tmp_path / 'profile'}",
+        "--virtual-time-budget=5000",
     ]
 
 
-@pytest.mark.skipif(find_chromium() is None, reason="headless Chromium is not installed (Debian package 'chromium')")
+@pytest.mark.skipif(
+    find_chromium() is None, reason="headless Chromium is not installed (Debian package 'chromium')"
+)
 def test_report_opens_in_a_browser_with_every_image_loaded(report, tmp_path):
     html_path, _ = write_report(report, tmp_path / "report.html")
     probe = tmp_path / "probe.html"
@@ -114,7 +138,9 @@ def test_report_opens_in_a_browser_with_every_image_loaded(report, tmp_path):
     binary = find_chromium()
     dom = subprocess.run(
         chromium_args(binary, tmp_path) + ["--dump-dom", probe.as_uri()],
-        capture_output=True, text=True, timeout=120,
+        capture_output=True,
+        text=True,
+        timeout=120,
     ).stdout
     n_images = 2 + 2 * sum(len(r.runs) for r in report.records)
     assert f'data-images-loaded="{n_images}/{n_images}"' in dom
@@ -122,8 +148,10 @@ def test_report_opens_in_a_browser_with_every_image_loaded(report, tmp_path):
     os.makedirs(shots, exist_ok=True)
     shot = os.path.join(shots, "report_screenshot.png")
     subprocess.run(
-        chromium_args(binary, tmp_path) + ["--window-size=1200,1600", f"--screenshot={shot}", html_path.as_uri()],
-        capture_output=True, timeout=120,
+        chromium_args(binary, tmp_path)
+        + ["--window-size=1200,1600", f"--screenshot={shot}", html_path.as_uri()],
+        capture_output=True,
+        timeout=120,
     )
     with open(shot, "rb") as fh:
         assert fh.read(8) == b"\x89PNG\r\n\x1a\n"

@@ -30,8 +30,19 @@ def run_method_tests(name: str, kind: str | None) -> subprocess.CompletedProcess
     if kind is not None:
         env.update(TEXSYN_SABOTAGE=kind, TEXSYN_SABOTAGE_METHOD=name)
     tests = os.path.dirname(__file__)
-    command = [sys.executable, "-m", "pytest", tests, "-q", "-x", "-p", "no:cacheprovider",
-               "-m", "not slow", f"--method-tests={name}"]
+    command = [
+        sys.executable,
+        "-m",
+        "pytest",
+        tests,
+        "-q",
+        "-x",
+        "-p",
+        "no:cacheprovider",
+        "-m",
+        "not slow",
+        f"--method-tests={name}",
+    ]
     return subprocess.run(command, env=env, capture_output=True, text=True, timeout=900)
 
 
@@ -47,4 +58,6 @@ def test_method_has_tests_that_pass_unsabotaged(name):
 def test_sabotage_is_caught(name, kind):
     done = run_method_tests(name, kind)
     # 1: tests ran and some failed; 5 (no tests) or 0 (all passed) mean the method is unguarded
-    assert done.returncode == 1, f"{kind} of {name} was not caught (exit {done.returncode}):\n{done.stdout[-3000:]}"
+    assert done.returncode == 1, (
+        f"{kind} of {name} was not caught (exit {done.returncode}):\n{done.stdout[-3000:]}"
+    )

@@ -7,10 +7,17 @@ import pytest
 
 import texsyn
 from texsyn.io import load_fitted, save_fitted
-from texsyn.ops.sparse import box_power as _box_power, image_energy, image_update, upsample_bicubic
 from texsyn.ops import HistogramMatcher, average_patches, extract_patches
 from texsyn.ops.graphcut import cut_value, graphcut_reassemble, kwatra_costs, seam_take_old
-from texsyn.ops.sparse import batch_omp, constrained_matching_pursuit, ksvd
+from texsyn.ops.sparse import (
+    batch_omp,
+    constrained_matching_pursuit,
+    image_energy,
+    image_update,
+    ksvd,
+    upsample_bicubic,
+)
+from texsyn.ops.sparse import box_power as _box_power
 
 
 def unit_dictionary(rng, dim, n):
@@ -160,8 +167,14 @@ def test_image_update_decreases_the_energy_with_linear_reconstruction():
         energies = []
         v = u.copy()
         for _ in range(8):
-            energies.append(image_energy(v, coded, tau, step, projector, alpha=1.0, beta=beta, box_power=power, reference=ref))
-            v = image_update(v, recon, projector, alpha=1.0, beta=beta, box_power=power, reference=ref, n_steps=1, rng=None)
+            energies.append(
+                image_energy(
+                    v, coded, tau, step, projector, alpha=1.0, beta=beta, box_power=power, reference=ref
+                )
+            )
+            v = image_update(
+                v, recon, projector, alpha=1.0, beta=beta, box_power=power, reference=ref, n_steps=1, rng=None
+            )
         assert np.all(np.diff(energies) <= 1e-10 * energies[0])
         assert energies[-1] < energies[0]
 

@@ -12,16 +12,16 @@ import functools
 
 import numpy as np
 import pytest
+
+import texsyn
 from conftest import FAST_PARAMS
 from strength_utils import GRAVEL as EXEMPLAR
 from strength_utils import SEEDS, SHAPE, coherent_fraction
-
-import texsyn
 from texsyn.methods.wavelet_sampling import block_indices, propagate
 from texsyn.metrics import sharpness_ratio, spectrum_distance
 from texsyn.ops import as_channels, extract_patches
-from texsyn.transforms.dtcwt import DTCWT
 from texsyn.ops.sparse import batch_omp
+from texsyn.transforms.dtcwt import DTCWT
 
 COPY_METHODS = ("quilting", "efros_leung", "wei_levoy", "cwt")
 

@@ -14,10 +14,10 @@ import functools
 
 import numpy as np
 import pytest
-from conftest import FAST_PARAMS
-from strength_utils import autocorrelation_gap, band_log2_ratios
 
 import texsyn
+from conftest import FAST_PARAMS
+from strength_utils import autocorrelation_gap, band_log2_ratios
 from texsyn.metrics import sharpness_ratio
 
 GRAVEL = texsyn.data.exemplar("gravel", size=48)

@@ -13,9 +13,9 @@ import functools
 
 import numpy as np
 import pytest
-from strength_utils import autocorrelation_gap, band_log2_ratios
 
 import texsyn
+from strength_utils import autocorrelation_gap, band_log2_ratios
 from texsyn.metrics import sharpness_ratio
 from texsyn.ops.flow import builtin_flow
 from texsyn.ops.fluid import advect

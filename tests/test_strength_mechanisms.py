@@ -17,7 +17,6 @@ import pytest
 import texsyn
 from texsyn.metrics import ps_statistics
 
-
 # ---------------------------------------------------------------------------- quilting
 Q_EXEMPLAR = texsyn.data.exemplar("brick", size=64)
 Q_PATCH, Q_OVERLAP = 16, 4
@@ -134,7 +133,9 @@ def ps_family(stats, family: str) -> np.ndarray:
 
 @functools.cache
 def ps_fitted():
-    return texsyn.make_method("portilla_simoncelli", n_scales=PS_SCALES, n_iterations=PS_ITERATIONS).fit(PS_EXEMPLAR)
+    return texsyn.make_method("portilla_simoncelli", n_scales=PS_SCALES, n_iterations=PS_ITERATIONS).fit(
+        PS_EXEMPLAR
+    )
 
 
 @functools.cache
@@ -152,7 +153,10 @@ def ps_gaps(seed: int) -> tuple[dict, dict]:
     def gaps(image):
         stats = ps_statistics(image, n_scales=PS_SCALES)
         return {
-            f: float(np.linalg.norm(ps_family(stats, f) - ps_family(target, f)) / np.linalg.norm(ps_family(target, f)))
+            f: float(
+                np.linalg.norm(ps_family(stats, f) - ps_family(target, f))
+                / np.linalg.norm(ps_family(target, f))
+            )
             for f in families
         }
 

@@ -16,9 +16,9 @@ import functools
 
 import numpy as np
 import pytest
-from strength_utils import autocorrelation_gap, band_log2_ratios, exemplar_window_shares, psnr_db
 
 import texsyn
+from strength_utils import autocorrelation_gap, band_log2_ratios, exemplar_window_shares, psnr_db
 from texsyn.models.patch_wavelet import PatchWaveletTransform
 
 BRICK = texsyn.data.exemplar("brick", size=40)
@@ -147,7 +147,10 @@ def test_modify_moves_monotonically_toward_the_exemplars_statistics():
     """Paper section 5.2, Fig. 8: thresholding more details moves the texture steadily from
     the input toward the exemplar."""
     distances = np.mean(
-        [[np.abs(band_log2_ratios(m.image, BRICK, 3)).sum() for m in modified(name)] for name in ("gravel", "grass")],
+        [
+            [np.abs(band_log2_ratios(m.image, BRICK, 3)).sum() for m in modified(name)]
+            for name in ("gravel", "grass")
+        ],
         axis=0,
     )
     slack = 0.1 * distances[0]

@@ -13,14 +13,13 @@ import functools
 
 import numpy as np
 import pytest
+
+import texsyn
 from conftest import FAST_PARAMS
 from strength_utils import GRAVEL as EXEMPLAR
 from strength_utils import SEEDS, SHAPE, band_log2_ratios
-
-import texsyn
 from texsyn.metrics import ps_statistics, spectrum_distance
 from texsyn.ops import periodic_smooth_decomposition
-
 
 
 @functools.cache

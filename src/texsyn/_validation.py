@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+
 from .errors import InputError, InputTypeError, MemoryLimitError
 
 __all__ = [
@@ -124,8 +125,7 @@ def as_exemplar(image: Any, *, name: str = "exemplar") -> np.ndarray:
     if arr.ndim == 3 and arr.shape[2] in (2, 4):
         if np.any(arr[..., -1] < 1.0):
             warnings.warn(
-                f"{name} has a transparency channel; it is dropped (texsyn synthesises colour "
-                "or grey only)",
+                f"{name} has a transparency channel; it is dropped (texsyn synthesises colour or grey only)",
                 UserWarning,
                 stacklevel=3,
             )
@@ -133,21 +133,15 @@ def as_exemplar(image: Any, *, name: str = "exemplar") -> np.ndarray:
     if arr.ndim == 3 and arr.shape[2] == 1:
         arr = arr[..., 0]
     if arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[2] != 3):
-        raise InputError(
-            f"{name} must have shape (H, W) or (H, W, 3), got shape {tuple(arr.shape)}"
-        )
+        raise InputError(f"{name} must have shape (H, W) or (H, W, 3), got shape {tuple(arr.shape)}")
     if arr.shape[0] < 2 or arr.shape[1] < 2:
-        raise InputError(
-            f"{name} is {arr.shape[1]}x{arr.shape[0]} pixels; at least 2x2 is needed"
-        )
+        raise InputError(f"{name} is {arr.shape[1]}x{arr.shape[0]} pixels; at least 2x2 is needed")
     if not np.all(np.isfinite(arr)):
         bad = int(np.count_nonzero(~np.isfinite(arr)))
         raise InputError(f"{name} contains {bad} NaN or infinite values; all values must be finite")
     lo, hi = float(arr.min()), float(arr.max())
     if lo < 0.0 or hi > 1.0:
-        raise InputError(
-            f"{name} values must lie in [0, 1], got values in [{lo:.4g}, {hi:.4g}]"
-        )
+        raise InputError(f"{name} values must lie in [0, 1], got values in [{lo:.4g}, {hi:.4g}]")
     return np.ascontiguousarray(arr)
 
 
@@ -252,7 +246,11 @@ def check_memory(need: float, *, what: str, advice: str) -> None:
     if need <= limit:
         return
     env = os.environ.get(MEMORY_LIMIT_VARIABLE, "").strip()
-    source = f"{MEMORY_LIMIT_VARIABLE}={env}" if env else f"default: half the RAM; {MEMORY_LIMIT_VARIABLE} is unset"
+    source = (
+        f"{MEMORY_LIMIT_VARIABLE}={env}"
+        if env
+        else f"default: half the RAM; {MEMORY_LIMIT_VARIABLE} is unset"
+    )
     raise MemoryLimitError(
         f"{what} would need about {human_bytes(need)} of memory, more than the limit of "
         f"{human_bytes(limit)} ({source}); {advice}, or set {MEMORY_LIMIT_VARIABLE} to at "

@@ -8,7 +8,8 @@ progress reports and its stopping rule are written here once.
 
 from __future__ import annotations
 
-from typing import Callable, TypeVar
+from collections.abc import Callable
+from typing import TypeVar
 
 from ..ops.progress import Reporter
 

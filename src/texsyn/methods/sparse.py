@@ -43,7 +43,16 @@ MODES = ("basic", "frequency", "graphcut", "multiscale", "full")
 #: version of the in-memory state of :meth:`ConstrainedSparse.fitted_state` (texsyn 0.1's file format)
 FORMAT_VERSION = 1
 #: parameters that change what ``fit`` learns (a loaded dictionary cannot change them)
-LEARNED = ("patch_size", "step", "n_scales", "sparsity", "n_atoms", "ksvd_iterations", "ksvd_training", "fit_rng")
+LEARNED = (
+    "patch_size",
+    "step",
+    "n_scales",
+    "sparsity",
+    "n_atoms",
+    "ksvd_iterations",
+    "ksvd_training",
+    "fit_rng",
+)
 
 
 class ConstrainedSparse(TextureSynthesizer):

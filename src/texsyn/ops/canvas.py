@@ -38,7 +38,7 @@ def padded_canvas(
     >>> padded_canvas((30, 50), multiple=8)
     (32, 56)
     """
-    low = (minimum, minimum) if np.ndim(minimum) == 0 else tuple(minimum)  # type: ignore[arg-type]
+    low: tuple[int, int] = (minimum, minimum) if isinstance(minimum, (int, np.integer)) else tuple(minimum)  # type: ignore[assignment]
     out = []
     for side, least in zip(shape[:2], low):
         n = max(int(side) + int(extra), int(least))

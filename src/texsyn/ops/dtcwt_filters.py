@@ -12,5 +12,5 @@ warnings.warn(
     stacklevel=2,
 )
 
-from ..transforms.dtcwt_filters import *  # noqa: F403
-from ..transforms.dtcwt_filters import FILTERS  # noqa: F401
+from ..transforms.dtcwt_filters import *  # noqa: E402, F403
+from ..transforms.dtcwt_filters import FILTERS  # noqa: E402, F401

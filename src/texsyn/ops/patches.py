@@ -48,9 +48,7 @@ def wrap_seam_ratio(image: np.ndarray) -> float:
     and columns. Natural photographs give values well above 1.5; periodic textures about 1.
     """
     img = as_channels(np.asarray(image, dtype=np.float64))
-    across = np.concatenate(
-        [np.abs(img[-1] - img[0]).ravel(), np.abs(img[:, -1] - img[:, 0]).ravel()]
-    ).mean()
+    across = np.concatenate([np.abs(img[-1] - img[0]).ravel(), np.abs(img[:, -1] - img[:, 0]).ravel()]).mean()
     inside = np.concatenate(
         [np.abs(np.diff(img, axis=0)).ravel(), np.abs(np.diff(img, axis=1)).ravel()]
     ).mean()
@@ -98,9 +96,7 @@ def extract_patches(
     cols = _anchors(w, n, stride, mode)
     windows = sliding_window_view(img, (n, n), axis=(0, 1))  # (h', w', C, n, n)
     windows = windows[np.ix_(rows, cols)]  # one copy of the chosen windows only
-    patches = np.ascontiguousarray(windows.transpose(0, 1, 3, 4, 2)).reshape(
-        len(rows) * len(cols), -1
-    )
+    patches = np.ascontiguousarray(windows.transpose(0, 1, 3, 4, 2)).reshape(len(rows) * len(cols), -1)
     rr, cc = np.meshgrid(rows, cols, indexing="ij")
     return patches, np.stack([rr.ravel(), cc.ravel()], axis=1)
 
@@ -137,8 +133,8 @@ def overlap_add(
     for ch in range(c):
         out[:, ch] = np.bincount(flat, weights=blocks[..., ch].ravel(), minlength=h * w)
     coverage = np.bincount(flat, minlength=h * w).reshape(h, w).astype(np.float64)
-    out = out.reshape(h, w, c)
-    return (out[..., 0] if len(shape) == 2 else out), coverage
+    image = out.reshape(h, w, c)
+    return (image[..., 0] if len(shape) == 2 else image), coverage
 
 
 def average_patches(

@@ -7,8 +7,8 @@ policies").
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
@@ -97,7 +97,7 @@ class Reporter:
                 Progress(self.stage, int(done), self.total if total is None else int(total), image, info)
             )
 
-    def stage_of(self, stage: str, total: int = 0) -> "Reporter":
+    def stage_of(self, stage: str, total: int = 0) -> Reporter:
         """A reporter of another stage that sends to the same callback."""
         return Reporter(self.callback, stage, total)
 

@@ -67,9 +67,7 @@ def min_path(cost: np.ndarray) -> np.ndarray:
     return _trace(cum, 0, int(np.argmin(cum[0])), 1)
 
 
-def l_shaped_cut(
-    error: np.ndarray, left: int, top: int
-) -> tuple[int, int, np.ndarray, np.ndarray]:
+def l_shaped_cut(error: np.ndarray, left: int, top: int) -> tuple[int, int, np.ndarray, np.ndarray]:
     """Minimum-error L-shaped cut: a vertical path in the left strip and a horizontal path
     in the top strip that meet at a corner pixel (Efros and Freeman 2001, section 2.1).
 
@@ -131,7 +129,7 @@ def boundary_cut_mask(error: np.ndarray, left: int, top: int) -> np.ndarray:
         return take_new
     if left <= 0:
         path = min_path(e[:top, :].T)
-        take_new[:top, :] = (np.arange(top)[:, None] >= path[None, :])
+        take_new[:top, :] = np.arange(top)[:, None] >= path[None, :]
         return take_new
     ci, cj, v_cols, h_rows = l_shaped_cut(e, left, top)
     marked = np.zeros((h, w), dtype=bool)
