@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import statistics
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -29,7 +30,7 @@ from scipy import ndimage
 
 import texsyn
 from texsyn.io import read_image
-from texsyn.methods.sparse import MODES, ConstrainedSparse
+from texsyn.methods.sparse import MODES
 from texsyn.ops import extract_patches
 
 REPO = Path(__file__).resolve().parents[1]
@@ -76,12 +77,12 @@ def main(argv: list[str] | None = None) -> int:
         fit_rows.append(
             f"| {name} | {fit_total:.1f} | {fitted.fit_seconds_['dictionary']:.1f} | {fitted.fit_seconds_['exemplar_codes']:.1f} |"
         )
-        state = fitted.fitted_state()
+        saved = texsyn.save(fitted, Path(tempfile.mkdtemp()) / "sparse.npz")
         tau = fitted.patch_size
         threshold = np.percentile(patch_variances(ex, tau), 10)
         ge_ex, lp_ex = gradient_energy(ex), lowpass_std(ex, tau)
         for mode in MODES:
-            method = ConstrainedSparse.from_fitted_state(state, mode=mode)
+            method = texsyn.load(saved, mode=mode)
             log = []
             start = time.perf_counter()
             out = method.sample((256, 256), rng=0, callback=log.append).astype(np.float64)

@@ -66,7 +66,8 @@ def test_sparse_stores_its_dictionaries_and_keeps_sampling_parameters_open(colou
 
 def test_a_texsyn_0_1_sparse_file_still_loads(colour_exemplar, tmp_path):
     model = fast_method("sparse").fit(colour_exemplar)
-    state = model.fitted_state()
+    with pytest.warns(DeprecationWarning, match="fitted_state"):
+        state = model.fitted_state()
     params = json.loads(str(state["params"]))
     params["random_state"] = params.pop("fit_rng")  # texsyn 0.1's name of the seed
     state["params"] = np.array(json.dumps(params))
@@ -75,6 +76,11 @@ def test_a_texsyn_0_1_sparse_file_still_loads(colour_exemplar, tmp_path):
         np.savez_compressed(fh, **state)
     loaded = texsyn.load(path)
     assert loaded.sample((20, 20), rng=1).tobytes() == model.sample((20, 20), rng=1).tobytes()
+    with pytest.warns(DeprecationWarning, match="from_fitted_state"):
+        again = type(model).from_fitted_state(state, n_outer=1)
+    assert again.n_outer == 1 and again.sample((20, 20), rng=1).shape == (20, 20, 3)
+    with pytest.raises(InputError, match="patch_size"), pytest.warns(DeprecationWarning):
+        type(model).from_fitted_state(state, patch_size=8)
 
 
 def test_existing_file_is_kept_without_overwrite(saved_random_phase):

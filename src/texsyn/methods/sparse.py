@@ -43,7 +43,7 @@ MODES = ("basic", "frequency", "graphcut", "multiscale", "full")
 #: version of the in-memory state of :meth:`ConstrainedSparse.fitted_state` (texsyn 0.1's file format)
 FORMAT_VERSION = 1
 #: parameters that change what ``fit`` learns (a loaded dictionary cannot change them)
-LEARNED = (
+LEARNED: tuple[str, ...] = (
     "patch_size",
     "step",
     "n_scales",
@@ -368,39 +368,32 @@ class ConstrainedSparse(TextureSynthesizer):
         return self
 
     def fitted_state(self) -> dict[str, np.ndarray]:
-        """The fitted model as plain arrays with the parameters, in memory (texsyn 0.1's format 1).
-
-        For sampling one dictionary in several modes (:meth:`from_fitted_state`); files: :func:`texsyn.save`.
-        """
+        """Deprecated (texsyn 0.1): the fitted model as arrays in memory; use :func:`texsyn.save`."""
+        warnings.warn("fitted_state() is deprecated; use texsyn.save", DeprecationWarning, stacklevel=2)
         self._require_fitted()
-        return {
-            "format_version": np.array(FORMAT_VERSION),
-            "method": np.array(self.name),
-            "params": np.array(json.dumps(self.get_params())),
-            "exemplar": self.exemplar_,
-            **self.model_.to_arrays(),
-        }
+        params = np.array(json.dumps(self.get_params()))
+        header = {"format_version": np.array(FORMAT_VERSION), "method": np.array(self.name), "params": params}
+        return {**header, "exemplar": self.exemplar_, **self.model_.to_arrays()}
 
     @classmethod
     def from_fitted_state(cls, state, **params) -> ConstrainedSparse:
-        """Rebuild a fitted instance; ``params`` may change sampling parameters only."""
-        version = int(np.asarray(state["format_version"]))
-        if version != FORMAT_VERSION:
-            raise InputError(f"fitted state has format_version {version}; this texsyn reads {FORMAT_VERSION}")
-        if (method := str(np.asarray(state["method"]))) != cls.name:
-            raise InputError(f"fitted state is for method {method!r}, not {cls.name!r}")
+        """Deprecated (texsyn 0.1): rebuild from :meth:`fitted_state`; use :func:`texsyn.load`."""
+        warnings.warn("from_fitted_state() is deprecated; use texsyn.load", DeprecationWarning, stacklevel=2)
+        if (
+            int(np.asarray(state["format_version"])) != FORMAT_VERSION
+            or str(np.asarray(state["method"])) != cls.name
+        ):
+            raise InputError(f"not a fitted state of method {cls.name!r} in format version {FORMAT_VERSION}")
         with warnings.catch_warnings():  # a state of texsyn 0.1 names the seed random_state
             warnings.simplefilter("ignore", DeprecationWarning)
             saved = cls.canonical_params(json.loads(str(np.asarray(state["params"]))))
-        params = cls.canonical_params(params, stacklevel=2)
-        changed = sorted(k for k in params if k in LEARNED and params[k] != saved.get(k))
+            params = cls.canonical_params(params)
+        changed = sorted(k for k in params if k in cls.learned_params and params[k] != saved.get(k))
         if changed:
             raise InputError(
                 f"cannot change {', '.join(changed)} of a loaded dictionary (they change what fit learned)"
             )
-        unknown = sorted(set(params) - set(cls.param_specs()))
-        if unknown:
-            raise InputError(f"unknown parameter {unknown[0]!r} for method {cls.name!r}")
-        header = ("format_version", "method", "params", "exemplar")
-        arrays = {k: v for k, v in state.items() if k not in header}
+        arrays = {
+            k: v for k, v in state.items() if k not in ("format_version", "method", "params", "exemplar")
+        }
         return cls(**{**saved, **params}).restore_fitted(state["exemplar"], arrays)
