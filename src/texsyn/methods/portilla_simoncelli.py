@@ -162,8 +162,9 @@ class PortillaSimoncelli(TextureSynthesizer):
     n_iterations : int
         Alternating-projection iterations (the paper uses 50).
     colour : str
-        'joint' (the exemplar's principal colour axes with every cross-channel statistic;
-        the ``'pca'`` space of :mod:`texsyn.ops.color`) or 'grey' (luma only, grey output).
+        'pca' (the exemplar's principal colour axes with every cross-channel statistic, the
+        ``'pca'`` space of :mod:`texsyn.ops.color`; 'joint' is its round-1 name) or 'grey'
+        (luma only, grey output).
     """
 
     name = "portilla_simoncelli"
@@ -181,7 +182,7 @@ class PortillaSimoncelli(TextureSynthesizer):
         n_orientations: Annotated[int, Range(1, 8)] = 4,
         lags: Annotated[int, Range(0, 8)] = 3,
         n_iterations: Annotated[int, Range(0, 2000)] = 50,
-        colour: Annotated[str, OneOf(("joint", "grey"))] = "joint",
+        colour: Annotated[str, OneOf(("pca", "grey", "joint"))] = "pca",
     ):
         self.n_scales = n_scales
         self.n_orientations = n_orientations
@@ -224,7 +225,7 @@ class PortillaSimoncelli(TextureSynthesizer):
         """
         h, w, c = shape_dims(exemplar_shape)
         k = float(h * w)
-        channels = 3 if c == 3 and self.colour == "joint" else 1
+        channels = 3 if c == 3 and self.colour != "grey" else 1
         terms = {"exemplar": 16.0 * k * c}
         if output_shape is None:
             terms["analysis of the exemplar"] = k * (150.0 + channels * (100.0 + 140.0 * self.n_orientations))

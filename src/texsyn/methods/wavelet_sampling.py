@@ -38,7 +38,7 @@ from .._validation import OneOf, Range
 from ..drivers.coarse_to_fine import coarse_to_fine
 from ..drivers.raster import grow_pixels
 from ..errors import InputError
-from ..ops.color import rgb_to_yuv, yuv_to_rgb
+from ..ops.color import ColourSpace, colour_space
 from ..ops.nonparametric import NonParametricSampler
 from ..ops.patches import as_channels
 from ..ops.progress import Reporter
@@ -218,7 +218,8 @@ class ComplexWaveletSampling(TextureSynthesizer):
     def _fit(self, exemplar: np.ndarray) -> None:
         """Step 1: the DT-CWT of every channel; the coarsest subbands of Y become the search bank."""
         ex = crop_to_multiple(as_channels(exemplar), 2**self.levels)
-        channels = rgb_to_yuv(ex) if ex.shape[2] == 3 else ex
+        self.colour_space_: ColourSpace = colour_space("yuv", ex)  # the paper works on Y, U, V
+        channels = self.colour_space_.forward(ex)
         transform = self._transform()
         self.pyramids_ = [transform.forward(channels[..., c]) for c in range(channels.shape[2])]
         top = self.pyramids_[0].highpasses[-1]
@@ -246,9 +247,7 @@ class ComplexWaveletSampling(TextureSynthesizer):
         Reporter(callback, "propagation", 1)(1, info=info)
         transform = self._transform()
         planes = [transform.inverse(propagate(p, maps, lowpass_map)) for p in self.pyramids_]
-        image = np.stack(planes, axis=-1)
-        if image.shape[2] == 3:
-            image = yuv_to_rgb(image)
+        image = self.colour_space_.inverse(np.stack(planes, axis=-1))
         # pixel source: the level-0 position of each pixel's coefficients, two pixels per position
         pixel = block_indices(maps[0], 2)
         pixel[..., 0] = np.minimum(pixel[..., 0], self.cropped_shape_[0] - 1)

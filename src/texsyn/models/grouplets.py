@@ -14,7 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..ops import ColorPCA, hist_target, luma, match_sorted_rows, periodic_smooth_decomposition
+from ..ops import hist_target, luma, match_sorted_rows, periodic_smooth_decomposition
+from ..ops.color import ColorPCA, ColourSpace, colour_space
 from ..ops.flow import association_fields, orient_field, structure_tensor_orientation
 from ..transforms.grouplets import WaveletGroupletTransform
 
@@ -59,8 +60,9 @@ class GroupletModel:
         Sorted pixel values (principal-axis coordinates for colour).
     levels, grouplet_levels : int
         ``J`` pyramid detail bands and ``L`` grouplet scales.
-    pca : ColorPCA or None
-        Principal colour axes of a colour exemplar synthesised in colour; ``None`` for grey.
+    space : ColourSpace
+        The colour coordinates synthesised (:func:`texsyn.ops.color.colour_space`): the
+        principal axes of a colour exemplar, or its luma.
     """
 
     flow: np.ndarray
@@ -69,7 +71,12 @@ class GroupletModel:
     pixel_values: np.ndarray
     levels: int
     grouplet_levels: int
-    pca: ColorPCA | None = None
+    space: ColourSpace = ColourSpace("grey", 1)
+
+    @property
+    def pca(self) -> ColorPCA | None:
+        """The principal colour axes, ``None`` when the model is grey."""
+        return self.space.pca
 
     def __post_init__(self) -> None:
         for name in ("flow", "coherence", "band_values", "pixel_values"):
@@ -115,11 +122,8 @@ class GroupletModel:
         # one periodic component (Moisan) serves the geometry and the statistics: the
         # decomposition is linear and keeps the mean, so it commutes with luma and colour PCA
         periodic_img = periodic_smooth_decomposition(img)[0]
-        pca = ColorPCA(img) if img.ndim == 3 and colour == "pca" else None
-        if pca is not None:
-            coords, periodic = pca.forward(img), pca.forward(periodic_img)
-        else:
-            coords, periodic = luma(img)[..., None], luma(periodic_img)[..., None]
+        space = colour_space(colour, img)
+        coords, periodic = space.forward(img), space.forward(periodic_img)
         orientation, coherence = structure_tensor_orientation(
             luma(periodic_img), sigma=sigma, presmooth=presmooth
         )
@@ -134,7 +138,7 @@ class GroupletModel:
             pixel_values=np.sort(coords.reshape(-1, coords.shape[2]).T, axis=-1),
             levels=int(levels),
             grouplet_levels=int(grouplet_levels),
-            pca=pca,
+            space=space,
         )
 
     @property
@@ -194,7 +198,7 @@ class GroupletModel:
 
     def to_image(self, channels: np.ndarray) -> np.ndarray:
         """``(H, W, C)`` model channels (principal-axis coordinates) to an ``(H, W[, 3])`` image."""
-        return self.pca.inverse(channels) if self.pca is not None else channels[..., 0]
+        return self.space.inverse(channels)
 
 
 def _wavelet_grouplets(flow: np.ndarray, levels: int, grouplet_levels: int) -> WaveletGroupletTransform:
