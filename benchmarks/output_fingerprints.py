@@ -71,7 +71,9 @@ def fingerprints() -> dict[str, str]:
     out: dict[str, str] = {}
     grey = texsyn.data.exemplar("gravel", size=32).astype(np.float32)
     grey = grey.mean(axis=-1) if grey.ndim == 3 else grey
-    colour = texsyn.data.exemplar("brick", size=32)
+    # the built-in exemplars are grey: a colour one with correlated channels, made from three
+    colour = np.stack([texsyn.data.exemplar(n, size=32) for n in ("brick", "grass", "gravel")], axis=-1)
+    colour = np.clip(colour @ np.array([[0.6, 0.3, 0.1], [0.2, 0.6, 0.2], [0.1, 0.2, 0.7]]), 0, 1)
     for name in sorted(texsyn.METHODS):
         for label, ex in (("grey", grey), ("colour", colour)):
             try:
@@ -83,6 +85,9 @@ def fingerprints() -> dict[str, str]:
                 out[f"{name}/{label}/again"] = _digest(again.image)
             except Exception as exc:  # a method that refuses the small setting is recorded too
                 out[f"{name}/{label}/error"] = f"{type(exc).__name__}: {exc}"
+    for name in ("portilla_simoncelli", "grouplets"):  # the grey colour option on a colour exemplar
+        grey_model = texsyn.make_method(name, colour="grey", **_params(name)).fit(colour)
+        out[f"{name}/colour-grey/image"] = _digest(grey_model.sample((40, 44), rng=3))
     pw = texsyn.make_method("patch_wavelet", **_params("patch_wavelet")).fit(colour)
     texture = texsyn.data.exemplar("gravel", size=32)
     result = pw.modify(texture, 0.5)

@@ -45,5 +45,13 @@ def test_public_entry_points_have_examples():
     """The package front and the persistence functions show how they are called."""
     import texsyn
 
-    for func in (texsyn.synthesize,):
+    for func in (
+        texsyn.synthesize,
+        texsyn.modify,
+        texsyn.animate,
+        texsyn.save,
+        texsyn.load,
+        texsyn.make_method,
+        texsyn.TextureSynthesizer.sample,
+    ):
         assert ">>>" in (func.__doc__ or ""), f"{func.__qualname__} has no Examples section"

@@ -126,6 +126,14 @@ def modify(
     See Also
     --------
     texsyn.methods.PatchWavelet.modify : the same, returning the source map and magnitudes.
+
+    Examples
+    --------
+    >>> exemplar = data.exemplar("gravel", size=32)
+    >>> texture = synthesize(data.exemplar("grass", size=32), "random_phase", rng=0)
+    >>> halfway = modify(texture, exemplar, ratio=0.5, min_width=4)
+    >>> halfway.shape == texture.shape
+    True
     """
     method = make_method("patch_wavelet", **params).fit(exemplar)
     result = method.modify(
@@ -161,6 +169,12 @@ def animate(
     ------
     Frame
         ``frame.image`` (float32 in [0, 1]) and ``frame.flow`` (the velocity field).
+
+    Examples
+    --------
+    >>> frames = list(animate(data.exemplar("grass", size=32), n_frames=2, rng=0, n_iterations=1))
+    >>> len(frames), frames[0].image.shape, frames[0].flow.shape
+    (2, (32, 32), (32, 32, 2))
     """
     method = make_method("grouplets", **params).fit(exemplar)
     yield from method.animate(n_frames, shape, rng=rng, callback=callback)

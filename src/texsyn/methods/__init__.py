@@ -78,7 +78,36 @@ def get_method(name: str) -> type[TextureSynthesizer]:
 
 
 def make_method(name: str, **params) -> TextureSynthesizer:
-    """Construct a method by name, rejecting unknown parameters with the allowed list."""
+    """Construct a method by name, rejecting unknown parameters with the allowed list.
+
+    Parameters
+    ----------
+    name : str
+        A key of :data:`METHODS`.
+    **params
+        Hyperparameters (the method's ``__init__`` keywords); deprecated names are renamed
+        with a ``DeprecationWarning`` (:attr:`TextureSynthesizer.deprecated_params`).
+
+    Returns
+    -------
+    TextureSynthesizer
+        Not fitted yet.
+
+    Raises
+    ------
+    InputError
+        An unknown method or parameter, or a value outside the allowed range (at ``fit``).
+
+    Examples
+    --------
+    >>> method = make_method("quilting", patch_size=16)
+    >>> method.get_params()["patch_size"]
+    16
+    >>> make_method("quilting", size=3)
+    Traceback (most recent call last):
+    ...
+    texsyn.errors.InputError: unknown parameter 'size' for method 'quilting'; allowed: patch_size, overlap, tolerance, boundary_cut
+    """
     cls = get_method(name)
     params = cls.canonical_params(params, stacklevel=2)
     specs = cls.param_specs()

@@ -349,6 +349,17 @@ class TextureSynthesizer:
         ------
         MemoryLimitError
             Before any work, when the estimate exceeds the limit (``docs/memory.md``).
+
+        Examples
+        --------
+        >>> import texsyn
+        >>> model = texsyn.make_method("quilting", patch_size=12).fit(texsyn.data.exemplar("brick", size=48))
+        >>> stages = []
+        >>> texture = model.sample((64, 80), rng=1, callback=lambda p: stages.append(p.stage))
+        >>> texture.shape, stages[-1]
+        ((64, 80), 'blocks')
+        >>> bool((model.sample((64, 80), rng=1) == texture).all())  # the fitted model is unchanged
+        True
         """
         return self.sample_with_map(shape, rng=rng, callback=callback).image
 
