@@ -22,14 +22,15 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..ops.patches import extend_index
+from .coefficients import Coefficients
 from .dtcwt_filters import FILTERS
 
 __all__ = ["DTCWT", "DTCWTPyramid"]
 
 
 @dataclass
-class DTCWTPyramid:
-    """DT-CWT coefficients: ``lowpass`` and ``highpasses[level]`` of shape ``(h, w, 6)``.
+class DTCWTPyramid(Coefficients):
+    """DT-CWT coefficients (a :class:`~texsyn.transforms.coefficients.Coefficients`): ``lowpass`` and ``highpasses[level]`` of shape ``(h, w, 6)``.
 
     Levels are 0-based, the finest first, as in every transform of :mod:`texsyn.transforms`.
 
@@ -70,9 +71,6 @@ class DTCWTPyramid:
             return self.lowpass
         level, band = key
         return self.highpasses[level][..., band]
-
-    def items(self):
-        return [(k, self[k]) for k in self.keys()]
 
 
 def _along(x: np.ndarray, axis: int, fn) -> np.ndarray:

@@ -26,75 +26,13 @@ from typing import Any
 import numpy as np
 
 from ..ops.progress import Reporter
+from .coefficients import Coefficients
+from .patch_widths import descriptor_dimension, largest_width, level_width, planned_widths, width_chain
 
 __all__ = [
     "PatchLifting", "PatchWaveletCoefficients", "descriptor_dimension", "interleave", "largest_width",
     "level_width", "next_even", "planned_widths", "split", "width_chain",
 ]  # fmt: skip
-
-
-# ---------------------------------------------------------------------- window widths
-def largest_width(exemplar_shape: tuple[int, ...]) -> int:
-    """Largest window width an exemplar allows: the largest power of two ``<= min(H, W) / 2``."""
-    h, w = int(exemplar_shape[0]), int(exemplar_shape[1])
-    return 2 ** int(math.floor(math.log2(max(min(h, w) // 2, 1))))
-
-
-def level_width(level: int, min_width: int, max_width: int) -> int:
-    """Window width of ``level`` (1 is the finest): ``clamp(2^level, min_width, max_width)``.
-
-    The paper's ``w_j`` is ``2^j`` pixels, twice the spacing of the samples split at level
-    ``j`` (section 4); it is clamped below so that fine levels compare windows that carry
-    geometry and above so that coarse levels fit in the exemplar
-    (``docs/methods/patch_wavelet.md``, "Deviations").
-    """
-    return int(min(max(2**level, min_width), max_width))
-
-
-def width_chain(min_width: int, max_width: int, feature_width: int) -> list[int]:
-    """Every width a transform can use: ``min_width, 2 min_width, ... <= max_width`` and ``feature_width``."""
-    out, width = [], max(int(min_width), 1)
-    while width <= max_width:
-        out.append(width)
-        width *= 2
-    return sorted(set(out) | {int(feature_width)})
-
-
-def planned_widths(
-    exemplar_shape: tuple[int, ...],
-    *,
-    min_width: int = 8,
-    max_width: int | None = None,
-    feature_width: int | None = None,
-) -> list[int]:
-    """The window widths :meth:`PatchLifting.widths` will use, from shapes alone.
-
-    For memory estimates made before any array exists (``docs/memory.md``).
-
-    Examples
-    --------
-    >>> planned_widths((40, 40))
-    [8, 16]
-    >>> planned_widths((128, 128), min_width=4)
-    [4, 8, 16, 32, 64]
-    """
-    largest = largest_width(exemplar_shape)
-    top = largest if max_width is None else int(min(max_width, largest))
-    low = int(min(min_width, top))
-    feature = int(min(feature_width or min_width, top))
-    return width_chain(low, top, feature)
-
-
-def descriptor_dimension(width: int, max_resolution: int, channels: int) -> int:
-    """Length of the descriptor of a window of ``width``: ``min(width, max_resolution)^2 C``.
-
-    Examples
-    --------
-    >>> descriptor_dimension(32, 16, 3)
-    768
-    """
-    b = max(1, int(width) // int(max_resolution))
-    return (int(width) // b) ** 2 * int(channels)
 
 
 # ---------------------------------------------------------------------- lifting steps
@@ -126,8 +64,13 @@ def next_even(even: np.ndarray, axis: int, boundary: str) -> np.ndarray:
 
 # ---------------------------------------------------------------------- coefficients
 @dataclass
-class PatchWaveletCoefficients:
+class PatchWaveletCoefficients(Coefficients):
     """Coefficients of the patch-valued wavelet transform (section 4, Fig. 7).
+
+    As a :class:`~texsyn.transforms.coefficients.Coefficients`, ``coefficients[j, axis]``
+    addresses the details (``None`` for a missing entry) and ``coefficients['lowpass']`` the
+    coarse map. The one exception to 0-based levels: ``j`` is the paper's exponent of the
+    sample spacing ``2^(j-1)``, ``1 ... top_level`` (``docs/architecture.md``).
 
     Attributes
     ----------
@@ -168,7 +111,19 @@ class PatchWaveletCoefficients:
         cols = self.shape[1] // 2**level
         return (rows, 2 * cols) if axis == 0 else (rows, cols)
 
-    def __getitem__(self, key: tuple[int, int]) -> np.ndarray | None:
+    @property
+    def levels(self) -> int:
+        """Number of detail levels (``top_level``)."""
+        return int(self.top_level)
+
+    def keys(self) -> list:
+        """``(j, axis)`` for every level ``j = 1 ... top_level`` and axis, then ``'lowpass'``."""
+        return [(j, axis) for j in range(1, self.levels + 1) for axis in (0, 1)] + ["lowpass"]
+
+    def __getitem__(self, key):
+        """The coarse map, or the details of ``(j, axis)`` (``None``: zero details)."""
+        if key == "lowpass":
+            return self.coarse
         return self.details.get(key)
 
     def norms(self) -> dict:
@@ -348,7 +303,7 @@ class PatchLifting:
             width = self.width(j)
             for axis in (1, 0):
                 predicted = self.predict(T, axis, j, boundary)
-                d = coefficients[(j, axis)]
+                d = coefficients.details.get((j, axis))
                 odd = predicted
                 if d is not None:
                     if d.shape[:2] != T.shape[:2]:

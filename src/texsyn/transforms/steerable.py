@@ -24,6 +24,8 @@ from math import factorial
 
 import numpy as np
 
+from .coefficients import Coefficients
+
 __all__ = [
     "Pyramid",
     "SteerablePyramid",
@@ -36,8 +38,8 @@ __all__ = [
 
 
 @dataclass
-class Pyramid:
-    """Coefficients of a steerable pyramid.
+class Pyramid(Coefficients):
+    """Coefficients of a steerable pyramid (a :class:`~texsyn.transforms.coefficients.Coefficients`).
 
     Attributes
     ----------
@@ -55,6 +57,11 @@ class Pyramid:
     highpass: np.ndarray
     bands: list[list[np.ndarray]] = field(default_factory=list)
     lowpass: np.ndarray | None = None
+
+    @property
+    def levels(self) -> int:
+        """Number of band levels."""
+        return len(self.bands)
 
     def keys(self) -> list:
         out: list = ["highpass"]
@@ -78,9 +85,6 @@ class Pyramid:
         else:
             level, band = key
             self.bands[level][band] = value
-
-    def items(self):
-        return [(k, self[k]) for k in self.keys()]
 
 
 def radial_lowpass(r: np.ndarray) -> np.ndarray:
