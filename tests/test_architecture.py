@@ -1,7 +1,11 @@
 """The layer picture of ``docs/architecture.md``, enforced (issue 17).
 
-- a module imports only from lower layers (or from its own package);
-- no module uses another module's private (``_name``) names;
+- a module imports only from lower layers (or from its own package); a function whose
+  docstring starts "Deprecated" (a shim keeping an old name working) may import lazily from
+  above, and a module whose docstring starts "Deprecated alias" is exempt; dynamic imports
+  (``importlib.import_module``) count as imports;
+- no module uses another module's private (``_name``) names, nor a private module of another
+  package (``from texsyn.methods import _base`` outside ``texsyn.methods``);
 - no module is over 400 lines without a paragraph at its top saying why.
 """
 
@@ -9,6 +13,7 @@ from __future__ import annotations
 
 import ast
 import re
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -35,13 +40,11 @@ LAYERS: dict[str, int] = {
     "texsyn": 11,
 }
 
-#: upward imports that exist only to keep a deprecated name working, each with its reason
-DEPRECATED_ALIASES: dict[tuple[str, str], str] = {
-    ("texsyn.io", "texsyn.persistence"): "texsyn.io.save_fitted/load_fitted, deprecated for texsyn.save/load",
-}
-
 MAX_LINES = 400
 REASON = re.compile(r"^Why this module is long:", re.M)
+#: a function whose docstring starts with this word is a deprecation shim: it alone may import
+#: lazily from a higher layer (to keep an old name working) or import dynamically
+SHIM = "Deprecated"
 
 
 def _modules() -> list[tuple[str, Path]]:
@@ -55,38 +58,84 @@ def _modules() -> list[tuple[str, Path]]:
 
 
 def _part(module: str) -> str:
-    """The entry of :data:`LAYERS` a module belongs to (its longest matching prefix)."""
+    """The entry of :data:`LAYERS` a module belongs to (its longest matching prefix).
+
+    ``"texsyn"`` itself stands for the package's ``__init__`` only: a new top-level module or
+    package must be given a layer in :data:`LAYERS`.
+    """
     best = ""
     for key in LAYERS:
-        if (module == key or module.startswith(key + ".")) and len(key) > len(best):
+        matches = module == key or (key != "texsyn" and module.startswith(key + "."))
+        if matches and len(key) > len(best):
             best = key
     assert best, f"module {module} has no layer in LAYERS (docs/architecture.md)"
     return best
 
 
-def _resolve(module: str, is_package: bool, node: ast.ImportFrom) -> str:
-    if node.level == 0:
-        return node.module or ""
+@dataclass(frozen=True)
+class Import:
+    """One import of a texsyn module: ``from target import name`` or ``import target``."""
+
+    line: int
+    target: str
+    name: str | None
+    in_shim: bool  # inside a function whose docstring starts with SHIM
+    dynamic: bool = False  # importlib.import_module / __import__
+
+
+def _resolve(module: str, is_package: bool, level: int, name: str | None) -> str:
+    if level == 0:
+        return name or ""
     base = module.split(".")
     if not is_package:
         base = base[:-1]
-    base = base[: len(base) - (node.level - 1)]
-    return ".".join(base + ([node.module] if node.module else []))
+    base = base[: len(base) - (level - 1)]
+    return ".".join(base + ([name] if name else []))
 
 
-def _imports(module: str, path: Path):
+def _parents(tree: ast.AST) -> dict[ast.AST, ast.AST]:
+    return {child: node for node in ast.walk(tree) for child in ast.iter_child_nodes(node)}
+
+
+def _in_shim(node: ast.AST, parents: dict[ast.AST, ast.AST]) -> bool:
+    while node in parents:
+        node = parents[node]
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            if (ast.get_docstring(node) or "").startswith(SHIM):
+                return True
+    return False
+
+
+def _imports(module: str, path: Path) -> list[Import]:
     tree = ast.parse(path.read_text())
+    parents = _parents(tree)
     is_package = path.name == "__init__.py"
+    out = []
     for node in ast.walk(tree):
+        shim = _in_shim(node, parents)
         if isinstance(node, ast.ImportFrom):
-            target = _resolve(module, is_package, node)
-            if target.startswith("texsyn"):
-                for alias in node.names:
-                    yield node.lineno, target, alias.name
+            target = _resolve(module, is_package, node.level, node.module)
+            if target == "texsyn" or target.startswith("texsyn."):
+                out += [Import(node.lineno, target, alias.name, shim) for alias in node.names]
         elif isinstance(node, ast.Import):
-            for alias in node.names:
-                if alias.name.startswith("texsyn"):
-                    yield node.lineno, alias.name, None
+            out += [
+                Import(node.lineno, alias.name, None, shim)
+                for alias in node.names
+                if alias.name == "texsyn" or alias.name.startswith("texsyn.")
+            ]
+        elif isinstance(node, ast.Call):
+            func = node.func
+            called = func.attr if isinstance(func, ast.Attribute) else getattr(func, "id", "")
+            if called in ("import_module", "__import__"):
+                arg = node.args[0] if node.args else None
+                if isinstance(arg, ast.Constant) and isinstance(arg.value, str):
+                    name = arg.value
+                    level = len(name) - len(name.lstrip("."))
+                    target = _resolve(module, is_package, level, name.lstrip(".") or None) if level else name
+                else:
+                    target = "<computed>"
+                out.append(Import(node.lineno, target, None, shim, dynamic=True))
+    return out
 
 
 def _is_deprecated_alias(path: Path) -> bool:
@@ -98,53 +147,141 @@ MODULES = _modules()
 NAMES = {name for name, _ in MODULES}
 
 
-@pytest.mark.parametrize("module,path", MODULES, ids=[m for m, _ in MODULES])
-def test_imports_only_go_down(module, path):
+def _package(module: str, path: Path) -> str:
+    return module if path.name == "__init__.py" else module.rpartition(".")[0]
+
+
+def _private_outside(target: str, importer_package: str) -> str | None:
+    """The first private segment of ``target`` whose package does not contain the importer."""
+    parts = target.split(".")
+    for i, part in enumerate(parts):
+        if part.startswith("_") and not part.startswith("__"):
+            owner = ".".join(parts[:i])
+            if not (importer_package == owner or importer_package.startswith(owner + ".")):
+                return ".".join(parts[: i + 1])
+    return None
+
+
+def upward_imports(module: str, path: Path) -> list[str]:
+    """The imports of ``module`` that do not go down the layers (outside deprecation shims)."""
     if _is_deprecated_alias(path):
-        return
+        return []
     mine = _part(module)
     wrong = []
-    for line, target, name in _imports(module, path):
-        full = f"{target}.{name}" if name and f"{target}.{name}" in NAMES else target
+    for imp in _imports(module, path):
+        if imp.in_shim:
+            continue
+        if imp.target == "<computed>":
+            wrong.append(f"{path.name}:{imp.line} imports a computed module name outside a deprecation shim")
+            continue
+        full = f"{imp.target}.{imp.name}" if imp.name and f"{imp.target}.{imp.name}" in NAMES else imp.target
         theirs = _part(full)
-        if theirs == mine or full.startswith(mine + ".") and mine != "texsyn":
+        if theirs == mine or LAYERS[theirs] < LAYERS[mine]:
             continue
-        if mine == "texsyn" and module != "texsyn":
-            continue  # a top-level module outside LAYERS would have failed in _part
-        if LAYERS[theirs] < LAYERS[mine]:
-            continue
-        if (mine, theirs) in DEPRECATED_ALIASES:
-            continue
-        wrong.append(f"{path.name}:{line} imports {full} (layer {LAYERS[theirs]} >= {LAYERS[mine]})")
+        wrong.append(f"{path.name}:{imp.line} imports {full} (layer {LAYERS[theirs]} >= {LAYERS[mine]})")
+    return wrong
+
+
+@pytest.mark.parametrize("module,path", MODULES, ids=[m for m, _ in MODULES])
+def test_imports_only_go_down(module, path):
+    wrong = upward_imports(module, path)
     assert not wrong, "\n".join(wrong)
+
+
+def _attribute_chain(node: ast.Attribute) -> list[str] | None:
+    parts = []
+    current: ast.expr = node
+    while isinstance(current, ast.Attribute):
+        parts.append(current.attr)
+        current = current.value
+    if not isinstance(current, ast.Name):
+        return None
+    parts.append(current.id)
+    return parts[::-1]
+
+
+def private_uses(module: str, path: Path) -> list[str]:
+    """Uses of other modules' private names or private modules by ``module``."""
+    package = _package(module, path)
+    wrong = []
+    bound: dict[str, str] = {}  # local name -> texsyn module it is bound to
+    tree = ast.parse(path.read_text())
+    for imp in _imports(module, path):
+        if imp.dynamic:
+            continue
+        full = f"{imp.target}.{imp.name}" if imp.name else imp.target
+        private = _private_outside(full if imp.name is None or full in NAMES else imp.target, package)
+        if private:
+            wrong.append(f"{path.name}:{imp.line} imports the private module {private}")
+        if imp.name and imp.name.startswith("_") and not imp.name.startswith("__") and full not in NAMES:
+            wrong.append(f"{path.name}:{imp.line} takes {imp.name} from {imp.target}")
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            target = _resolve(module, path.name == "__init__.py", node.level, node.module)
+            for alias in node.names:
+                if f"{target}.{alias.name}" in NAMES:
+                    bound[alias.asname or alias.name] = f"{target}.{alias.name}"
+        elif isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.name.startswith("texsyn"):
+                    key = alias.asname or alias.name.split(".")[0]
+                    bound[key] = alias.name if alias.asname else "texsyn"
+    for node in ast.walk(tree):
+        if not isinstance(node, ast.Attribute):
+            continue
+        chain = _attribute_chain(node)
+        if not chain or chain[0] not in bound:
+            continue
+        current = bound[chain[0]]
+        for attr in chain[1:]:
+            if f"{current}.{attr}" in NAMES:
+                current = f"{current}.{attr}"
+                private = _private_outside(current, package)
+                if private:
+                    wrong.append(f"{path.name}:{node.lineno} uses the private module {private}")
+                    break
+                continue
+            if attr.startswith("_") and not attr.startswith("__"):
+                wrong.append(f"{path.name}:{node.lineno} uses {current}.{attr}")
+            break
+    return sorted(set(wrong))
 
 
 @pytest.mark.parametrize("module,path", MODULES, ids=[m for m, _ in MODULES])
 def test_no_private_names_of_other_modules(module, path):
-    wrong = []
-    for line, target, name in _imports(module, path):
-        if name and name.startswith("_") and not name.startswith("__"):
-            if f"{target}.{name}" in NAMES:
-                continue  # importing a private *module* of one's own package is allowed
-            wrong.append(f"{path.name}:{line} takes {name} from {target}")
-    tree = ast.parse(path.read_text())
-    imported_modules = {
-        (alias.asname or alias.name)
-        for node in ast.walk(tree)
-        if isinstance(node, ast.ImportFrom)
-        for alias in node.names
-        if f"{_resolve(module, path.name == '__init__.py', node)}.{alias.name}" in NAMES
-    }
-    for node in ast.walk(tree):
-        if (
-            isinstance(node, ast.Attribute)
-            and isinstance(node.value, ast.Name)
-            and node.value.id in imported_modules
-            and node.attr.startswith("_")
-            and not node.attr.startswith("__")
-        ):
-            wrong.append(f"{path.name}:{node.lineno} uses {node.value.id}.{node.attr}")
+    wrong = private_uses(module, path)
     assert not wrong, "\n".join(wrong)
+
+
+#: violations the checks must catch (each written into a fake module of the given package)
+VIOLATIONS = [
+    ("texsyn.models.fake", "def f():\n    import texsyn.methods as m\n    return m\n", upward_imports),
+    (
+        "texsyn.models.fake",
+        "import importlib\nM = importlib.import_module('texsyn.methods')\n",
+        upward_imports,
+    ),
+    ("texsyn.models.fake", "import importlib\nM = importlib.import_module(NAME)\n", upward_imports),
+    ("texsyn.io.fake", "from ..persistence import load\n", upward_imports),
+    ("texsyn.ops.fake", "from .. import methods\n", upward_imports),
+    ("texsyn.report.fake", "from texsyn.methods import _base\n", private_uses),
+    ("texsyn.metrics.fake", "import texsyn.ops.search as s\nX = s._x\n", private_uses),
+    ("texsyn.metrics.fake", "import texsyn.ops.search\nX = texsyn.ops.search._x\n", private_uses),
+    ("texsyn.metrics.fake", "from texsyn import ops\nX = ops.search._x\n", private_uses),
+    ("texsyn.ops.fake", "from .search import _fold_minima\n", private_uses),
+]
+
+
+@pytest.mark.parametrize("module,source,check", VIOLATIONS)
+def test_the_checks_catch_violations(module, source, check, tmp_path):
+    path = tmp_path / "fake.py"
+    path.write_text('"""A module that breaks the rules."""\n' + source)
+    assert check(module, path), f"not caught: {source!r} in {module}"
+
+
+def test_a_new_top_level_module_needs_a_layer():
+    with pytest.raises(AssertionError, match="no layer"):
+        _part("texsyn.extra.x")
 
 
 @pytest.mark.parametrize("module,path", MODULES, ids=[m for m, _ in MODULES])
@@ -169,9 +306,9 @@ def test_nothing_imports_a_deprecated_alias(module, path):
     if module in ALIASES:
         return
     wrong = [
-        f"{path.name}:{line} imports {target}"
-        for line, target, name in _imports(module, path)
-        if target in ALIASES or (name and f"{target}.{name}" in ALIASES)
+        f"{path.name}:{imp.line} imports {imp.target}"
+        for imp in _imports(module, path)
+        if not imp.in_shim and (imp.target in ALIASES or (imp.name and f"{imp.target}.{imp.name}" in ALIASES))
     ]
     assert not wrong, "\n".join(wrong)
 

@@ -53,7 +53,7 @@ _DEPRECATED = {
 
 
 def __getattr__(name: str):
-    """Resolve the deprecated names of :data:`_DEPRECATED`, with a warning, lazily."""
+    """Deprecated names of :data:`_DEPRECATED`: resolved lazily, with a warning."""
     if name in _DEPRECATED:
         warnings.warn(
             f"texsyn.io.{name} is deprecated; use {_DEPRECATED[name]}", DeprecationWarning, stacklevel=2

@@ -86,7 +86,7 @@ _MOVED = {
 
 
 def __getattr__(name: str):
-    """Resolve the names that moved to :mod:`texsyn.transforms`, with a deprecation warning."""
+    """Deprecated names: resolve those that moved to :mod:`texsyn.transforms`, with a warning."""
     module = _MOVED.get(name)
     if module is None:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
