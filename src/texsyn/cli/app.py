@@ -10,6 +10,8 @@ Exit status (``docs/errors.md``):
   unreadable file, bad size or value, unknown method or parameter, output that exists,
   names an input, or lies in a missing or read-only folder, work too large for memory).
 - 130: interrupted (SIGINT, Ctrl-C); 143: terminated (SIGTERM).
+- 141: the reader of the output left (``texsyn methods | head -1``): like a program that
+  SIGPIPE ends, texsyn stops quietly, without a message.
 
 Every error prints one line ``texsyn: error: ...`` on stderr, every warning one line
 ``texsyn: warning: ...`` (a deprecated parameter name among them). Outputs are written all
@@ -38,6 +40,7 @@ from .common import State
 
 __all__ = [
     "EXIT_BAD_INPUT",
+    "EXIT_BROKEN_PIPE",
     "EXIT_FAILURE",
     "EXIT_INTERRUPTED",
     "EXIT_OK",
@@ -53,6 +56,7 @@ EXIT_FAILURE = 1
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130  # 128 + SIGINT
 EXIT_TERMINATED = 143  # 128 + SIGTERM
+EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE
 
 
 class Terminated(BaseException):
@@ -110,6 +114,9 @@ def report_error(exc: BaseException, state: State) -> int:
         sys.stderr.write(line.rstrip() + "\n")
         sys.stderr.flush()
 
+    if isinstance(exc, BrokenPipeError):  # nobody reads any more: nothing to say
+        _silence_closed_streams()
+        return EXIT_BROKEN_PIPE
     if isinstance(exc, Terminated):
         say("texsyn: terminated")
         return EXIT_TERMINATED
@@ -139,6 +146,27 @@ def report_error(exc: BaseException, state: State) -> int:
     hint = "" if state.debug else " (run with --debug for the traceback)"
     say(f"texsyn: internal error: {type(exc).__name__}: {_one_line(str(exc), 300)}{hint}")
     return EXIT_FAILURE
+
+
+def _silence_closed_streams() -> None:
+    """Point a standard stream whose reader left at ``/dev/null``.
+
+    Python flushes ``stdout`` and ``stderr`` at exit; what is left for a closed pipe would
+    print ``Exception ignored ... BrokenPipeError`` (the Python documentation's recipe,
+    ``signal`` module, "Note on SIGPIPE").
+    """
+    for stream in (sys.stdout, sys.stderr):
+        if stream is None:  # pragma: no cover - started without the stream
+            continue
+        try:
+            stream.flush()
+        except OSError:
+            try:
+                devnull = os.open(os.devnull, os.O_WRONLY)
+                os.dup2(devnull, stream.fileno())
+                os.close(devnull)
+            except (OSError, ValueError):  # pragma: no cover - a stream without a descriptor
+                pass
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):
@@ -188,9 +216,10 @@ def _run(args: list[str], state: State) -> int:
         if not args:
             with click.Context(cli, info_name="texsyn") as ctx:
                 click.echo(cli.get_help(ctx))
-            return EXIT_OK
-        with cli.make_context("texsyn", list(args), obj=state) as ctx:
-            cli.invoke(ctx)
+        else:
+            with cli.make_context("texsyn", list(args), obj=state) as ctx:
+                cli.invoke(ctx)
+        sys.stdout.flush()  # a closed pipe shows here, not at exit
         return EXIT_OK
     except click.exceptions.Exit as exc:
         return exc.exit_code

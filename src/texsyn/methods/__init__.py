@@ -86,7 +86,8 @@ def make_method(name: str, **params) -> TextureSynthesizer:
         A key of :data:`METHODS`.
     **params
         Hyperparameters (the method's ``__init__`` keywords); deprecated names are renamed
-        with a ``DeprecationWarning`` (:attr:`TextureSynthesizer.deprecated_params`).
+        (:attr:`TextureSynthesizer.deprecated_params`) and deprecated values kept, with a
+        ``DeprecationWarning`` naming the caller's line, by the class constructor.
 
     Returns
     -------
@@ -109,9 +110,8 @@ def make_method(name: str, **params) -> TextureSynthesizer:
     texsyn.errors.InputError: unknown parameter 'size' for method 'quilting'; allowed: patch_size, overlap, tolerance, boundary_cut
     """
     cls = get_method(name)
-    params = cls.canonical_params(params, stacklevel=2)
     specs = cls.param_specs()
-    unknown = sorted(set(params) - set(specs))
+    unknown = sorted(set(params) - set(specs) - set(cls.deprecated_params))
     if unknown:
         allowed = ", ".join(specs) if specs else "none"
         raise InputError(f"unknown parameter {unknown[0]!r} for method {name!r}; allowed: {allowed}")

@@ -14,7 +14,6 @@ attributes ending in ``_``; ``sample`` never changes them, and :func:`texsyn.sav
 from __future__ import annotations
 
 import functools
-import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -32,6 +31,7 @@ from ..errors import InputError
 from ..ops.canvas import default_output_shape
 from ..ops.linalg import fixed_order
 from ..ops.progress import Progress
+from ._deprecation import rename_deprecated, warn_deprecated
 from ._memory import pixel_count, planned_exemplar_shape, shape_dims
 from ._params import ParamSpec, read_param_specs
 
@@ -84,39 +84,38 @@ class TextureSynthesizer:
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
-        if cls.__dict__.get("deprecated_params") and "__init__" in cls.__dict__:
+        if "__init__" in cls.__dict__:
             init = cls.__dict__["__init__"]
 
             @functools.wraps(init)
             def __init__(self, *args: Any, **params: Any) -> None:
-                init(self, *args, **type(self).canonical_params(params, stacklevel=2))
+                if type(self).__init__ is __init__:  # the outermost: warn once, at the user's line
+                    params = type(self).canonical_params(params)
+                    for message in type(self).deprecated_values(params):
+                        warn_deprecated(message)
+                init(self, *args, **params)
 
             cls.__init__ = __init__  # type: ignore[method-assign]
 
     @classmethod
-    def canonical_params(cls, params: dict[str, Any], *, stacklevel: int = 2) -> dict[str, Any]:
+    def canonical_params(cls, params: dict[str, Any], *, stacklevel: int | None = None) -> dict[str, Any]:
         """``params`` with deprecated names replaced by their new ones (a warning each).
+
+        ``stacklevel`` counts from the caller (1); ``None`` names the first frame outside
+        texsyn, the user's (:func:`~texsyn.methods._deprecation.user_stacklevel`).
 
         Raises
         ------
         InputError
             When a parameter is given under both its old and its new name.
         """
-        out = dict(params)
-        for old, new in cls.deprecated_params.items():
-            if old in out:
-                if new in out:
-                    raise InputError(
-                        f"parameter {old!r} of method {cls.name!r} is the deprecated name of "
-                        f"{new!r}; give only {new!r}"
-                    )
-                warnings.warn(
-                    f"parameter {old!r} of method {cls.name!r} is deprecated; use {new!r}",
-                    DeprecationWarning,
-                    stacklevel=stacklevel + 1,
-                )
-                out[new] = out.pop(old)
-        return out
+        level = None if stacklevel is None else stacklevel + 1
+        return rename_deprecated(params, cls.deprecated_params, cls.name, level)
+
+    @classmethod
+    def deprecated_values(cls, params: dict[str, Any]) -> list[str]:
+        """Warnings for deprecated values in ``params``, given at construction (none by default)."""
+        return []
 
     # ------------------------------------------------------------------ parameters
     @classmethod

@@ -41,23 +41,17 @@ from ._base import TextureSynthesizer
 from ._memory import fft_search_bytes, output_bytes, shape_dims
 from ._params import ParamSpec
 from .multiscale_gaussian import MSLG
-from .single_scale_gaussian import PASTE, clamp_neighbours, local_gaussian_bytes, overlap_pixels, single_scale
+from .single_scale_gaussian import (
+    PASTE,
+    OverlapSpec,
+    clamp_neighbours,
+    local_gaussian_bytes,
+    overlap_fraction_warning,
+    overlap_pixels,
+    single_scale,
+)
 
 __all__ = ["CLG", "LG", "MSLG", "RCLG", "gaussian_resample", "raster_positions"]
-
-
-# ---------------------------------------------------------------------------- overlap parameter
-class _OverlapSpec(ParamSpec):
-    """``overlap`` on the command line: pixels, or a deprecated fraction such as ``0.5``."""
-
-    def parse(self, text: str, method: str) -> Any:
-        try:
-            value = float(text)
-        except ValueError:
-            value = None
-        if value is not None and 0 < value < 1:
-            return value  # converted (with a warning) by the method's parameter check
-        return super().parse(text, method)
 
 
 # ---------------------------------------------------------------------------- Algorithm 2: the methods
@@ -79,26 +73,28 @@ class _LocalGaussianBase(TextureSynthesizer):
         """The parameters; ``overlap`` also parses a deprecated fraction on the command line."""
         specs = super().param_specs()
         spec = specs["overlap"]
-        specs["overlap"] = _OverlapSpec(**{f.name: getattr(spec, f.name) for f in fields(spec)})
+        specs["overlap"] = OverlapSpec(**{f.name: getattr(spec, f.name) for f in fields(spec)})
         return specs
 
+    @classmethod
+    def deprecated_values(cls, params: dict[str, Any]) -> list[str]:
+        """An ``overlap`` given as a fraction of the patch (round 1's meaning)."""
+        overlap = params.get("overlap")
+        if not isinstance(overlap, (float, np.floating)) or not 0 < overlap < 1:
+            return []
+        size = params.get("patch_size", cls.param_specs()["patch_size"].default)
+        return [overlap_fraction_warning(f"parameter 'overlap' of method {cls.name!r}", float(overlap), size)]
+
     def _check_params(self) -> None:
-        overlap = self.overlap
-        fraction = isinstance(overlap, (float, np.floating))  # pixels are integers
-        if fraction:
-            self.overlap = None  # checked (and converted) below
-        try:
-            super()._check_params()
-        finally:
-            if fraction:
-                self.overlap = overlap
-        if self.overlap is not None:
-            self.overlap = overlap_pixels(
-                self.overlap, self.patch_size, f"parameter 'overlap' of method {self.name!r}"
+        super()._check_params()
+        if self.overlap is not None:  # the pixels it stands for fit the patch
+            overlap_pixels(
+                self.overlap, self.patch_size, f"parameter 'overlap' of method {self.name!r}", warn=False
             )
 
     def _overlap_px(self) -> int:
-        return overlap_pixels(self.overlap, self.patch_size, "overlap")
+        """The overlap in pixels (computed each time: ``overlap`` stays as given)."""
+        return overlap_pixels(self.overlap, self.patch_size, "overlap", warn=False)
 
     def min_exemplar_size(self):
         side = self.patch_size + 1
@@ -162,7 +158,8 @@ class LG(_LocalGaussianBase):
     overlap : int or None
         Overlap between neighbouring patches, in pixels; ``None`` is half the patch
         (``round(n / 2)``). A float in (0, 1) is read as a fraction of the patch, as in
-        round 1, with a DeprecationWarning.
+        round 1, with a DeprecationWarning when the method is made; the parameter keeps the
+        value given (``fit`` never changes it).
     mode : str
         ``'sample'`` draws each patch; ``'mean'`` takes the most probable patch (the mean).
     seed_patch : str

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -33,27 +34,33 @@ from ..models.gaussian import LocalGaussian, PatchSource
 from ..ops.canvas import crop_to_output
 from ..ops.progress import Reporter
 from ..ops.seams import paste_average, paste_cut
+from ._deprecation import warn_deprecated
+from ._params import ParamSpec
 
 __all__ = [
     "PASTE",
+    "OverlapSpec",
     "clamp_neighbours",
     "conditional_patch",
     "draw",
     "first_patch",
     "lg_patch",
     "local_gaussian_bytes",
+    "overlap_fraction_warning",
     "overlap_pixels",
     "single_scale",
 ]
 
 
 # ---------------------------------------------------------------------------- the inputs
-def overlap_pixels(overlap: int | float | None, patch_size: int, where: str) -> int:
+def overlap_pixels(overlap: int | float | None, patch_size: int, where: str, *, warn: bool = True) -> int:
     """The overlap ``o`` in pixels: ``None`` is half the patch; a float in (0, 1) is a fraction.
 
-    A fraction is the meaning of round 1, kept with a :class:`DeprecationWarning`; it becomes
-    ``round(overlap * patch_size)`` pixels clipped to ``[1, patch_size - 1]``, as before, and
-    so does the default (``docs/architecture.md``, "Vocabulary": overlaps are in pixels).
+    A fraction is the meaning of round 1, kept with a :class:`DeprecationWarning` (when
+    ``warn``; the methods warn once, at construction, :func:`overlap_fraction_warning`); it
+    becomes ``round(overlap * patch_size)`` pixels clipped to ``[1, patch_size - 1]``, as
+    before, and so does the default (``docs/architecture.md``, "Vocabulary": overlaps are in
+    pixels).
 
     Raises
     ------
@@ -64,6 +71,8 @@ def overlap_pixels(overlap: int | float | None, patch_size: int, where: str) -> 
     --------
     >>> overlap_pixels(None, 10, "overlap"), overlap_pixels(3, 10, "overlap")
     (5, 3)
+    >>> overlap_pixels(0.25, 10, "overlap", warn=False)
+    2
     """
     n = int(patch_size)
     if overlap is None:
@@ -74,16 +83,52 @@ def overlap_pixels(overlap: int | float | None, patch_size: int, where: str) -> 
                 f"{where} is a number of pixels (an integer), or a deprecated fraction in (0, 1); "
                 f"got {overlap!r}"
             )
-        warnings.warn(
-            f"{where} as a fraction of the patch is deprecated; give pixels "
-            f"(overlap={int(np.clip(round(overlap * n), 1, n - 1))} for {overlap!r} of {n})",
-            DeprecationWarning,
-            stacklevel=4,
-        )
+        if warn:
+            warn_deprecated(overlap_fraction_warning(where, float(overlap), n))
         return int(np.clip(round(overlap * n), 1, n - 1))
     if not 1 <= int(overlap) < n:
         raise InputError(f"{where} must be between 1 and patch_size - 1 = {n - 1} pixels, got {overlap!r}")
     return int(overlap)
+
+
+def overlap_fraction_warning(where: str, overlap: float, patch_size: object) -> str:
+    """The deprecation message of an overlap given as a fraction; pixels when the size is known.
+
+    Examples
+    --------
+    >>> overlap_fraction_warning("overlap", 0.5, 40)
+    'overlap as a fraction of the patch is deprecated; give pixels (overlap=20 for 0.5 of 40)'
+    """
+    text = f"{where} as a fraction of the patch is deprecated; give pixels"
+    if isinstance(patch_size, (int, np.integer)) and not isinstance(patch_size, bool) and patch_size >= 2:
+        n = int(patch_size)
+        text += f" (overlap={int(np.clip(round(overlap * n), 1, n - 1))} for {overlap!r} of {n})"
+    return text
+
+
+class OverlapSpec(ParamSpec):
+    """``overlap``: pixels, or a deprecated fraction such as ``0.5`` (kept as given).
+
+    A fraction warns once, at construction (:meth:`texsyn.methods.gaussian.LG.deprecated_values`);
+    ``fit`` checks the pixels it stands for and never changes the parameter.
+    """
+
+    def parse(self, text: str, method: str) -> Any:
+        try:
+            value = float(text)
+        except ValueError:
+            value = None
+        if value is not None and 0 < value < 1:
+            return value
+        return super().parse(text, method)
+
+    def check(self, value: Any, method: str) -> Any:
+        if isinstance(value, (float, np.floating)) and not 0 < value < 1:  # pixels are integers
+            raise InputError(
+                f"parameter {self.name!r} of method {method!r} is a number of pixels (an integer), "
+                f"or a deprecated fraction in (0, 1); got {value!r}"
+            )
+        return value if isinstance(value, (float, np.floating)) else super().check(value, method)
 
 
 def clamp_neighbours(m: int, source: PatchSource, name: str) -> int:

@@ -21,11 +21,12 @@ import numpy as np
 from .._validation import as_exemplar
 from .._version import __version__
 from ..errors import InputError
-from ..methods import METHODS, Progress, make_method
+from ..methods import METHODS, make_method
 from ..metrics import evaluate, nearest_patch_field, synthesis_map
 from ..ops import position_colors
 from ..ops.canvas import default_output_shape
 from ..ops.linalg import fixed_order
+from ..ops.progress import Progress, Reporter
 from .records import MethodRecord, MethodRun, Report
 
 __all__ = ["run_comparison"]
@@ -82,7 +83,7 @@ def run_comparison(
     params = params or {}
     grid = np.stack(list(np.mgrid[: ex.shape[0], : ex.shape[1]]), axis=-1)
     records = []
-    total = len(names) * seeds
+    report = Reporter(callback, "methods", len(names) * seeds)
     done = 0
     for name in names:
         cls = METHODS.get(name)
@@ -119,8 +120,7 @@ def run_comparison(
                     )
                 )
                 done += 1
-                if callback is not None:
-                    callback(Progress("methods", done, total))
+                report(done)
         except Exception as exc:  # a failing method is reported, the others still run
             record.error = f"{type(exc).__name__}: {exc}"
             record.runs = []
@@ -128,8 +128,7 @@ def run_comparison(
             if tb:
                 record.error += f" (at {Path(tb[-1].filename).name}:{tb[-1].lineno})"
             done = names.index(name) * seeds + seeds
-            if callback is not None:
-                callback(Progress("methods", done, total))
+            report(done)
         records.append(record)
     return Report(
         exemplar=ex.astype(np.float32),
