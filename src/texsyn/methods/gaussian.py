@@ -40,7 +40,7 @@ from ..ops.progress import Reporter
 from ._base import TextureSynthesizer
 from ._memory import fft_search_bytes, output_bytes, shape_dims
 from ._params import ParamSpec
-from .multiscale_gaussian import MSLG
+from .multiscale_gaussian import MSLG, ZOOM_SIGMA  # noqa: F401  (round 1 imported ZOOM_SIGMA from here)
 from .single_scale_gaussian import (
     PASTE,
     OverlapSpec,

@@ -20,8 +20,9 @@ parameters and the deviations from the paper.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
-from typing import Annotated
+from typing import Annotated, cast
 
 import numpy as np
 
@@ -104,6 +105,7 @@ def ps_synthesis(
     pyramid: ComplexSteerablePyramid | None = None,
     reporter: Reporter | None = None,
     preview: Callable[[np.ndarray], np.ndarray] | None = None,
+    callback: Callable[[int, np.ndarray], None] | None = None,
 ) -> np.ndarray:
     """Portilla–Simoncelli alternating projections from ``initial`` (``(C, H, W)``), paper section 4.
 
@@ -123,16 +125,37 @@ def ps_synthesis(
         Receives one record per iteration.
     preview : callable, optional
         Turns the channels into the image shown with each record.
+    callback : callable, optional
+        Deprecated (round 1): ``callback(iteration, channels)`` after each iteration; use
+        ``reporter`` (and ``preview``) instead.
 
     Returns
     -------
     ndarray, shape (C, H, W)
     """
+    if callback is not None:
+        warnings.warn(
+            "ps_synthesis(callback=...) is deprecated; use reporter=texsyn.ops.progress.Reporter(...)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        if reporter is not None or preview is not None:
+            raise TypeError("ps_synthesis takes the deprecated callback or reporter/preview, not both")
+        legacy = callback
+        reporter = Reporter(
+            lambda record: legacy(record.done, cast(np.ndarray, record.image)), "iteration", n_iterations
+        )
+        preview = _same
     x = np.asarray(initial, dtype=np.float64).copy()
     if pyramid is None:
         pyramid = ComplexSteerablePyramid(x.shape[1:], target.n_scales, target.n_orientations, single=True)
     step = projection_step(target, pyramid, lags)
     return alternate_projections(x, step, n_iterations, reporter=reporter, preview=preview)
+
+
+def _same(channels: np.ndarray) -> np.ndarray:
+    """The channels themselves: what round 1's ``callback(iteration, channels)`` received."""
+    return channels
 
 
 def projection_step(target: PSStatistics, pyramid: ComplexSteerablePyramid, lags: int):

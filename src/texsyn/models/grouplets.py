@@ -10,13 +10,17 @@ by :meth:`GroupletModel.targets` and held by the caller (``docs/methods/grouplet
 
 from __future__ import annotations
 
+import warnings
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from typing import Any, cast
 
 import numpy as np
 
 from ..ops import hist_target, luma, match_sorted_rows, periodic_smooth_decomposition
 from ..ops.color import ColorPCA, ColourSpace, colour_space
 from ..ops.flow import association_fields, orient_field, structure_tensor_orientation
+from ..ops.progress import Reporter
 from ..transforms.grouplets import WaveletGroupletTransform
 
 __all__ = ["GroupletModel", "HistogramTargets"]
@@ -41,12 +45,60 @@ class HistogramTargets:
     bands: np.ndarray
     pixels: np.ndarray
 
+    def __iter__(self) -> Iterator[np.ndarray]:
+        """Deprecated: round 1's ``targets(n)`` was the tuple ``(bands, pixels)``."""
+        _warn_targets_tuple()
+        return iter((self.bands, self.pixels))
+
+    def __getitem__(self, index: int) -> np.ndarray:
+        """Deprecated: round 1's ``targets(n)`` was the tuple ``(bands, pixels)``."""
+        _warn_targets_tuple()
+        return (self.bands, self.pixels)[index]
+
+
+def _warn_targets_tuple() -> None:
+    warnings.warn(
+        "GroupletModel.targets(n) returns a HistogramTargets; using it as a (bands, pixels) tuple "
+        "is deprecated: use .bands and .pixels",
+        DeprecationWarning,
+        stacklevel=3,
+    )
+
+
+#: keywords of round 1's ``GroupletModel(exemplar, ...)``, now :meth:`GroupletModel.from_exemplar`
+_ROUND1_KEYWORDS = frozenset({"exemplar", "levels", "grouplet_levels", "sigma", "presmooth", "colour"})
+
+
+class _LearnsFromExemplar(type):
+    """Metaclass of :class:`GroupletModel`: the round-1 call form, deprecated.
+
+    ``GroupletModel(exemplar, levels=..., ...)`` learned the model in round 1; it now warns
+    and returns :meth:`GroupletModel.from_exemplar`'s model. Every other call (the fields, as
+    :meth:`from_exemplar`, :func:`dataclasses.replace` and unpickling make it) is the frozen
+    dataclass's own constructor. The forms cannot be confused: the dataclass needs at least
+    ``flow``, ``coherence``, ``band_values`` and ``pixel_values``, which round 1 never took.
+    """
+
+    def __call__(cls, *args: Any, **kwargs: Any) -> Any:
+        positional_exemplar = len(args) == 1 and "exemplar" not in kwargs
+        keyword_exemplar = not args and "exemplar" in kwargs
+        if (positional_exemplar or keyword_exemplar) and kwargs.keys() <= _ROUND1_KEYWORDS:
+            warnings.warn(
+                "GroupletModel(exemplar, ...) is deprecated; use GroupletModel.from_exemplar(exemplar, ...)",
+                DeprecationWarning,
+                stacklevel=2,
+            )
+            exemplar = args[0] if args else kwargs.pop("exemplar")
+            return cls.from_exemplar(exemplar, **kwargs)  # type: ignore[attr-defined]
+        return super().__call__(*args, **kwargs)
+
 
 @dataclass(frozen=True, eq=False)
-class GroupletModel:
+class GroupletModel(metaclass=_LearnsFromExemplar):
     """The statistics of Peyré's grouplet model, learned from an exemplar (paper section 3.1).
 
-    Build it with :meth:`from_exemplar`; its arrays are read-only.
+    Build it with :meth:`from_exemplar`; its arrays are read-only. Round 1's
+    ``GroupletModel(exemplar, levels=..., ...)`` still works, deprecated.
 
     Attributes
     ----------
@@ -83,6 +135,11 @@ class GroupletModel:
             array = np.asarray(getattr(self, name))
             array.setflags(write=False)
             object.__setattr__(self, name, array)
+
+    def __setstate__(self, state: dict) -> None:
+        """Unpickling (a model shipped to a batch worker) keeps the arrays read-only."""
+        self.__dict__.update(state)
+        self.__post_init__()
 
     @classmethod
     def from_exemplar(
@@ -199,6 +256,43 @@ class GroupletModel:
     def to_image(self, channels: np.ndarray) -> np.ndarray:
         """``(H, W, C)`` model channels (principal-axis coordinates) to an ``(H, W[, 3])`` image."""
         return self.space.inverse(channels)
+
+    def project(
+        self,
+        image: np.ndarray,
+        transform: WaveletGroupletTransform,
+        iterations: int,
+        callback: Callable[[int, np.ndarray], None] | None = None,
+    ) -> np.ndarray:
+        """Deprecated: use :func:`texsyn.drivers.alternating.alternate_projections` with :meth:`project_once`.
+
+        Round 1's alternating projections onto the model (Table 1, steps 2-6), kept with a
+        :class:`DeprecationWarning`: ``iterations`` passes of :meth:`project_once` with the
+        targets of the image's size; ``callback(k, channels)`` after pass ``k``. The driver
+        is imported when this is called, never when ``texsyn.models`` is imported.
+        """
+        warnings.warn(
+            "GroupletModel.project is deprecated; use texsyn.drivers.alternating.alternate_projections "
+            "with GroupletModel.project_once",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        from ..drivers.alternating import alternate_projections
+
+        targets = self.targets(image.shape[0] * image.shape[1])
+        reporter = None
+        if callback is not None:
+            legacy = callback
+            reporter = Reporter(
+                lambda record: legacy(record.done, cast(np.ndarray, record.image)), "iteration", iterations
+            )
+        return alternate_projections(
+            image,
+            lambda f, _k: self.project_once(f, transform, targets),
+            iterations,
+            reporter=reporter,
+            preview=lambda f: f,
+        )
 
 
 def _wavelet_grouplets(flow: np.ndarray, levels: int, grouplet_levels: int) -> WaveletGroupletTransform:

@@ -3,7 +3,8 @@
 The building block of the ``efros_leung`` method and of the coarsest level of the ``cwt``
 method (Gallagher and Kokaram), which runs it on stacks of complex wavelet subbands. The
 growing loop that calls it is :func:`texsyn.drivers.raster.grow_pixels`
-(``docs/methods/efros_leung.md``).
+(``docs/methods/efros_leung.md``); round 1's :func:`grow_texture` and
+:meth:`NonParametricSampler.grow` call it, deprecated.
 
 The distance of a partly known window to an exemplar window (Efros and Leung 1999, section
 2.1, and the reference MATLAB code): SSD over the known pixels only, weighted by a Gaussian
@@ -15,13 +16,17 @@ not interact, so that a batch can be searched with one matrix product.
 
 from __future__ import annotations
 
+import warnings
+from collections.abc import Callable
+
 import numba
 import numpy as np
 
 from .patches import as_channels, extract_patches
+from .progress import Reporter
 from .search import WeightedPatchBank
 
-__all__ = ["NonParametricSampler", "schedule_batches"]
+__all__ = ["NonParametricSampler", "grow_texture", "schedule_batches"]
 
 
 @numba.njit(cache=True)
@@ -159,3 +164,98 @@ class NonParametricSampler:
         d /= norm[:, None]
         choice, error = _pick_candidates(d, float(tolerance), uniforms)
         return self.centres[choice], error
+
+    def grow(
+        self,
+        shape: tuple[int, int],
+        *,
+        epsilon: float = 0.1,
+        max_error: float = 0.3,
+        seed_size: int = 3,
+        seed_block: tuple[int, int, int, int] | None = None,
+        rng: np.random.Generator,
+        callback: Callable[[int, int], None] | None = None,
+        max_batch: int = 256,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Deprecated: use :func:`texsyn.drivers.raster.grow_pixels` with this sampler.
+
+        The round-1 form of the Efros–Leung growing loop, kept with a
+        :class:`DeprecationWarning`; ``epsilon`` is now ``tolerance`` and ``callback(filled,
+        total)`` a :class:`~texsyn.ops.progress.Reporter`. The result is the same.
+        """
+        warnings.warn(
+            "NonParametricSampler.grow is deprecated; use texsyn.drivers.raster.grow_pixels(sampler, "
+            "shape, tolerance=..., reporter=...)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return _grow(self, shape, epsilon, max_error, seed_size, seed_block, rng, callback, max_batch)
+
+
+def grow_texture(
+    exemplar: np.ndarray,
+    shape: tuple[int, int],
+    *,
+    window: int = 11,
+    epsilon: float = 0.1,
+    max_error: float = 0.3,
+    seed_size: int = 3,
+    rng: np.random.Generator,
+    callback: Callable[[int, int], None] | None = None,
+    max_batch: int = 256,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Deprecated: use ``grow_pixels(NonParametricSampler(exemplar, window), shape, ...)``.
+
+    The round-1 one-call form of Efros and Leung's growth (section 2), kept with a
+    :class:`DeprecationWarning`: :func:`texsyn.drivers.raster.grow_pixels` with
+    ``tolerance=epsilon`` and a :class:`~texsyn.ops.progress.Reporter` that passes
+    ``(filled, total)`` to ``callback`` after every pass. The result is the same.
+
+    Returns
+    -------
+    values : ndarray, shape (H, W, C), float64
+    source : ndarray of int64, shape (H, W, 2)
+    """
+    warnings.warn(
+        "texsyn.ops.nonparametric.grow_texture is deprecated; use texsyn.drivers.raster.grow_pixels("
+        "NonParametricSampler(exemplar, window), shape, tolerance=..., reporter=...)",
+        DeprecationWarning,
+        stacklevel=2,
+    )
+    sampler = NonParametricSampler(exemplar, window)
+    return _grow(sampler, shape, epsilon, max_error, seed_size, None, rng, callback, max_batch)
+
+
+def _grow(
+    sampler: NonParametricSampler,
+    shape: tuple[int, int],
+    epsilon: float,
+    max_error: float,
+    seed_size: int,
+    seed_block: tuple[int, int, int, int] | None,
+    rng: np.random.Generator,
+    callback: Callable[[int, int], None] | None,
+    max_batch: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Deprecated forms' body: the drivers layer's growing loop, with the round-1 callback.
+
+    ``grow_pixels`` is imported when a deprecated form is called, never when ``texsyn.ops``
+    is imported: the layers below the drivers do not depend on them.
+    """
+    from ..drivers.raster import grow_pixels
+
+    reporter = None
+    if callback is not None:
+        legacy = callback
+        reporter = Reporter(lambda record: legacy(record.done, record.total), "pixels", shape[0] * shape[1])
+    return grow_pixels(
+        sampler,
+        shape,
+        tolerance=epsilon,
+        max_error=max_error,
+        seed_size=seed_size,
+        seed_block=seed_block,
+        rng=rng,
+        reporter=reporter,
+        max_batch=max_batch,
+    )

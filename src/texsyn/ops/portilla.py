@@ -6,7 +6,7 @@
 - :mod:`texsyn.models.portilla_projections`: ``impose_autocorrelation``, ``impose_skewness``,
   ``impose_kurtosis``, ``adjust_correlation``, ``adjust_cross_correlation``...;
 - :mod:`texsyn.methods.portilla_simoncelli`: ``ps_synthesis`` (now reporting through a
-  :class:`texsyn.ops.progress.Reporter`);
+  :class:`texsyn.ops.progress.Reporter`; round 1's ``callback=`` still works, deprecated);
 - :mod:`texsyn.transforms.steerable`: ``max_scales``.
 """
 

@@ -19,6 +19,7 @@ Levels keep the paper's numbering ``j = 1 ... J``, 1 the finest (detail keys ``(
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -251,6 +252,7 @@ class PatchLifting:
         *,
         grid_boundary: str = "periodic",
         report: Reporter | None = None,
+        callback: Callable[[int, int], None] | None = None,
     ) -> PatchWaveletCoefficients:
         """Forward transform of an ``n x n`` coordinate map, ``n = 2^J`` (Table 1).
 
@@ -266,7 +268,11 @@ class PatchLifting:
             Neighbour rule at the border of the sample grid (:func:`next_even`).
         report : Reporter, optional
             Receives ``(level, levels)`` after each level.
+        callback : callable, optional
+            Deprecated (round 1): ``callback(level, levels)`` after each level; use ``report``.
         """
+        if callback is not None:
+            _deprecated_callback(type(self).__name__, "forward")
         T = self._check_map(coords)
         levels = int(round(math.log2(min(T.shape[:2]))))
         details = {}
@@ -283,6 +289,8 @@ class PatchLifting:
                 T = even
             if report is not None:
                 report(level, levels)
+            if callback is not None:
+                callback(level, levels)
         return PatchWaveletCoefficients(T.copy(), levels, details, grid_boundary)
 
     def inverse_step(
@@ -328,11 +336,16 @@ class PatchLifting:
         coefficients: PatchWaveletCoefficients,
         *,
         report: Reporter | None = None,
+        callback: Callable[[int, int, np.ndarray], None] | None = None,
     ) -> np.ndarray:
         """Backward transform (Table 2): the ``coefficients.shape + (2,)`` coordinate map.
 
-        ``report`` (optional) receives ``(levels_done, levels)`` after each level.
+        ``report`` (optional) receives ``(levels_done, levels)`` after each level; the
+        deprecated ``callback`` of round 1 receives ``(levels_done, levels, T)``, ``T`` the
+        coordinate map reached.
         """
+        if callback is not None:
+            _deprecated_callback(type(self).__name__, "inverse")
         step = self.inverse_step(coefficients)
         T = np.asarray(coefficients.coarse, dtype=np.int64)
         top = coefficients.top_level
@@ -340,6 +353,8 @@ class PatchLifting:
             T = step(level, T)
             if report is not None:
                 report(done, top)
+            if callback is not None:
+                callback(done, top, T)
         return T
 
     def _check_map(self, coords: np.ndarray) -> np.ndarray:
@@ -353,3 +368,12 @@ class PatchLifting:
         if T.min() < 0 or T[..., 0].max() >= h or T[..., 1].max() >= w:
             raise ValueError("coordinate map holds positions outside the exemplar")
         return T.astype(np.int64)
+
+
+def _deprecated_callback(owner: str, name: str) -> None:
+    """Warn that round 1's ``callback=`` of :meth:`PatchLifting.forward`/``inverse`` was used."""
+    warnings.warn(
+        f"{owner}.{name}(callback=...) is deprecated; use report=texsyn.ops.progress.Reporter(...)",
+        DeprecationWarning,
+        stacklevel=3,
+    )
