@@ -6,15 +6,21 @@ files are refused with one clear :class:`~texsyn.errors.InputError`.
 
 from __future__ import annotations
 
+import io
 import json
+import os
+import time
+import tracemalloc
 import warnings
+import zipfile
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 import texsyn
 from conftest import fast_method
-from texsyn.errors import InputError, InputFileNotFoundError, OutputExistsError
+from texsyn.errors import InputError, InputFileNotFoundError, MemoryLimitError, OutputExistsError
 from texsyn.persistence import FORMAT_VERSION
 
 
@@ -174,3 +180,168 @@ def test_sparse_random_state_is_a_deprecated_name_of_fit_rng():
         assert texsyn.methods.ConstrainedSparse(random_state=3).fit_rng == 3
     with pytest.raises(InputError, match="give only 'fit_rng'"):
         texsyn.make_method("sparse", random_state=7, fit_rng=7)
+
+
+# --------------------------------------------------------------------------- hostile files
+# Files built by hand (numpy's .npy writer on zip members): each must be refused with one
+# InputError line, at once, without allocating what the file declares (docs/persistence.md,
+# "Reading a file from someone else").
+
+
+def _npy(array=None, *, shape=(), descr="<f8", data=b""):
+    """An .npy member: a real array, or a header declaring ``shape``/``descr`` and then ``data``."""
+    buf = io.BytesIO()
+    if array is not None:
+        np.lib.format.write_array(buf, np.asarray(array), allow_pickle=False)
+    else:
+        np.lib.format.write_array_header_1_0(buf, {"descr": descr, "fortran_order": False, "shape": shape})
+        buf.write(data)
+    return buf.getvalue()
+
+
+def _header(method="random_phase", **change):
+    header = {
+        "format": "texsyn-model",
+        "format_version": FORMAT_VERSION,
+        "texsyn_version": texsyn.__version__,
+        "method": method,
+        "params": {},
+        **change,
+    }
+    return _npy(np.array(json.dumps(header)))
+
+
+def _archive(path, members, compression=zipfile.ZIP_DEFLATED):
+    with zipfile.ZipFile(path, "w", compression) as zf:
+        for name, payload in members.items():
+            zf.writestr(name + ".npy", payload)
+    return path
+
+
+def _refused(path, match, error=InputError):
+    """Load ``path``: one ``error`` line matching ``match``, fast, with little memory."""
+    tracemalloc.start()
+    start = time.perf_counter()
+    try:
+        with pytest.raises(error, match=match) as info:
+            texsyn.load(path)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert time.perf_counter() - start < 2.0
+    assert peak < 20 * 2**20, f"loading took {peak} bytes"
+    message = str(info.value)
+    assert "\n" not in message and len(message) < 400, message
+    assert isinstance(info.value, InputError) and isinstance(info.value, ValueError)
+    return message
+
+
+_SMALL = np.full((8, 8, 3), 0.5)
+
+
+@pytest.mark.parametrize("shape", [(10**6, 10**6), (8000, 8000), (10**6, 10**6, 3)])
+def test_an_exemplar_declared_over_the_pixel_budget_is_refused_unread(tmp_path, shape):
+    path = _archive(tmp_path / "huge.npz", {"header": _header(), "exemplar": _npy(shape=shape)})
+    assert path.stat().st_size < 2000
+    message = _refused(path, "exemplar.*more than the 40 million allowed; set TEXSYN_MAX_PIXELS=")
+    assert "huge.npz" in message
+
+
+def test_the_exemplar_budgets_of_image_files_and_of_the_method_apply(saved_random_phase, monkeypatch):
+    path = saved_random_phase[1]
+    monkeypatch.setenv("TEXSYN_MAX_PIXELS", "100")
+    _refused(path, "more than the 100 allowed; set TEXSYN_MAX_PIXELS=")
+    monkeypatch.delenv("TEXSYN_MAX_PIXELS")
+    monkeypatch.setenv("TEXSYN_MEMORY_LIMIT", "1M")
+    message = _refused(path, "rp.npz.*random_phase.*fitting.*TEXSYN_MEMORY_LIMIT", MemoryLimitError)
+    assert "docs/memory.md" in message
+
+
+def test_learned_arrays_over_the_memory_limit_are_refused_unread(tmp_path, monkeypatch):
+    big = np.random.default_rng(0).random((320, 1000))  # 2.5 MiB
+    members = {"header": _header(), "exemplar": _npy(_SMALL), "fitted/s0_dictionary": _npy(big)}
+    path = _archive(tmp_path / "learned.npz", members, zipfile.ZIP_STORED)
+    monkeypatch.setenv("TEXSYN_MEMORY_LIMIT", "2M")
+    _refused(path, "loading the arrays of .*learned.npz.*TEXSYN_MEMORY_LIMIT", MemoryLimitError)
+
+
+def test_arrays_declaring_more_than_the_file_can_hold_are_refused(tmp_path, monkeypatch):
+    monkeypatch.setenv("TEXSYN_MEMORY_LIMIT", "64G")  # the size checks, not the memory limit
+    bomb = _archive(tmp_path / "bomb.npz", {"header": _header(), "exemplar": _npy(shape=(3000, 3000))})
+    _refused(bomb, r"declares 68.7 MiB of arrays in \d+ bytes, over 1100:1: refused as a decompression bomb")
+    cut = _archive(tmp_path / "cut.npz", {"header": _header(), "exemplar": _npy(shape=(100, 100, 3))})
+    _refused(cut, "array 'exemplar' declares 234.4 KiB but holds 128 bytes: truncated or forged")
+    short = _archive(tmp_path / "short.npz", {"header": _header(), "exemplar": _npy(_SMALL)[:-8]})
+    _refused(short, "array 'exemplar'")
+
+
+def test_a_compression_numpy_never_writes_is_refused(tmp_path):
+    members = {"header": _header(), "exemplar": _npy(_SMALL)}
+    path = _archive(tmp_path / "bz.npz", members, zipfile.ZIP_BZIP2)
+    _refused(path, "compressed in a way numpy never writes")
+
+
+@pytest.mark.parametrize("member", ["header", "exemplar", "fitted/s0_dictionary"])
+def test_python_objects_are_refused_from_the_array_header(tmp_path, member):
+    members = {
+        "header": _header(),
+        "exemplar": _npy(_SMALL),
+        member: _npy(shape=(2,), descr="|O", data=b"x" * 16),
+    }
+    path = _archive(tmp_path / "objects.npz", members)
+    _refused(path, f"array '{member}' holds Python objects")
+
+
+@pytest.mark.parametrize(
+    "text, match",
+    [
+        ("[" * 100_000, "header is not a texsyn-model header"),
+        ("{" * 100_000, "header is not a texsyn-model header"),
+        ('{"format": "texsyn-model", "params": ' + "[" * 100_000, "header is not a texsyn-model header"),
+    ],
+)
+def test_a_deeply_nested_header_is_refused(tmp_path, text, match):
+    path = _archive(tmp_path / "nested.npz", {"header": _npy(np.array(text)), "exemplar": _npy(_SMALL)})
+    _refused(path, match)
+
+
+def test_a_deeply_nested_texsyn_0_1_header_is_refused(tmp_path):
+    members = {
+        "format_version": _npy(np.array(1)),
+        "method": _npy(np.array("sparse")),
+        "params": _npy(np.array("[" * 100_000)),
+        "exemplar": _npy(_SMALL),
+    }
+    _refused(_archive(tmp_path / "old.npz", members), "parameters are not a mapping")
+
+
+def test_a_header_over_a_million_characters_is_refused_unread(tmp_path):
+    members = {"header": _npy(shape=(), descr="<U50000000"), "exemplar": _npy(_SMALL)}
+    _refused(_archive(tmp_path / "long.npz", members), "header is over 1,000,000 characters long")
+
+
+@pytest.mark.parametrize(
+    "content",
+    [b"\x89PNG\r\n\x1a\n" + bytes(200), _npy(_SMALL), b"", b"just some text\n"],
+    ids=["png", "npy", "empty", "text"],
+)
+def test_a_file_that_is_not_an_archive_gets_our_own_message(tmp_path, monkeypatch, content):
+    monkeypatch.chdir(tmp_path)
+    Path("picture.npz").write_bytes(content)
+    message = _refused("picture.npz", "not an .npz archive")
+    assert message == "'picture.npz' is not a saved texsyn model (not an .npz archive)"
+    assert "pickle" not in message
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="named pipes are POSIX")
+def test_a_pipe_is_refused_without_waiting_for_a_writer(tmp_path):
+    path = tmp_path / "pipe.npz"
+    os.mkfifo(path)
+    _refused(path, "not a regular file")
+    _refused(tmp_path, "is a folder")
+
+
+def test_every_refusal_is_an_input_error_that_front_doors_map_to_exit_2():
+    # texsyn.cli.report_error gives exit status 2 exactly for InputError (docs/errors.md)
+    assert issubclass(InputError, ValueError)
+    assert issubclass(MemoryLimitError, InputError) and issubclass(InputFileNotFoundError, InputError)

@@ -44,7 +44,16 @@ from .budget import (
 )
 from .files import library_said, open_checked, read_error
 from .libraries import PILLOW_FORMATS, mode_bits, pillow, pillow_open, pillow_target
-from .probes import PNM_MAGIC, Probe, png_raw_size, probe_png, probe_pnm, probe_tiff, probe_tifffile, probe_webp  # noqa: F401
+from .probes import (  # noqa: F401
+    PNM_MAGIC,
+    Probe,
+    png_raw_size,
+    probe_png,
+    probe_pnm,
+    probe_tiff,
+    probe_tifffile,
+    probe_webp,
+)
 
 __all__ = [
     "COMPRESSION_FLOOR_BYTES",

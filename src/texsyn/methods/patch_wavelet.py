@@ -35,7 +35,9 @@ from .._validation import OneOf, Range, as_exemplar
 from ..drivers.coarse_to_fine import coarse_to_fine
 from ..errors import InputError
 from ..models.patch_wavelet import PatchWaveletTransform
-from ..ops import as_channels, luma, match_histogram
+from ..ops import as_channels, match_histogram
+from ..ops.canvas import crop_to_output, extend_to_canvas, power_of_two_canvas
+from ..ops.color import colour_space
 from ..ops.linalg import fixed_order
 from ..ops.progress import Reporter
 from ..transforms.patch_wavelet import (
@@ -221,8 +223,8 @@ class PatchWavelet(TextureSynthesizer):
 
     def _sample(self, shape, rng, callback):
         transform: PatchWaveletTransform = self.transform_
-        h, w = shape
-        top = max(2, math.ceil(math.log2(max(h, w)))) - 1  # output side N = 2^(top + 1) >= 4
+        side = power_of_two_canvas(shape, minimum=4, square=True)[0]  # an N x N map, N >= 4
+        top = int(math.log2(side)) - 1  # N = 2^(top + 1)
         coefficients = self._random_coefficients(transform.exemplar_shape, top, rng)
         report = Reporter(callback, "levels", top)
         if report.active:
@@ -234,7 +236,7 @@ class PatchWavelet(TextureSynthesizer):
             reporter=report,
             preview=transform.image,
         )
-        coords = maps[0][:h, :w]
+        coords = crop_to_output(maps[0], shape)
         return transform.image(coords), coords
 
     # ------------------------------------------------------------------ modification
@@ -245,7 +247,7 @@ class PatchWavelet(TextureSynthesizer):
         Each side is rounded up to a power of two (at least 2) on its own, so the grid has
         fewer than four times the input's pixels whatever its aspect ratio.
         """
-        return tuple(2 ** max(1, math.ceil(math.log2(max(1, int(side))))) for side in shape[:2])
+        return power_of_two_canvas(shape, minimum=2)
 
     @fixed_order
     def modify(
@@ -317,11 +319,10 @@ class PatchWavelet(TextureSynthesizer):
             )
         tex = as_channels(np.asarray(as_exemplar(texture, name="texture"), dtype=np.float64))
         ex = as_channels(exemplar)
-        if tex.shape[2] != ex.shape[2]:
-            tex = np.repeat(tex, ex.shape[2], axis=2) if tex.shape[2] == 1 else luma(tex)[..., None]
+        tex = colour_space("rgb", ex).forward(tex)  # the exemplar's channels: grey repeated, or luma
         h, w = tex.shape[:2]
         n_h, n_w = self.modify_grid((h, w))
-        padded = np.pad(tex, ((0, n_h - h), (0, n_w - w), (0, 0)), mode="symmetric")
+        padded = extend_to_canvas(tex, (n_h, n_w), mode="symmetric")
         used = sorted(self._level_widths(ex.shape, int(math.log2(min(n_h, n_w)))))
         if equalize:
             equalized = np.stack(
@@ -346,12 +347,12 @@ class PatchWavelet(TextureSynthesizer):
             coords = coarse_to_fine(
                 transform.inverse_step(kept), kept.top_level, start=kept.coarse, reporter=walk
             )[0]
-            coords = coords[:h, :w]
+            coords = crop_to_output(coords, (h, w))
             results.append(
                 Modification(
                     image=self._as_output(transform.image(coords)),
                     source_map=coords.astype(np.int32),
-                    feature_map=features[:h, :w].astype(np.int32),
+                    feature_map=crop_to_output(features, (h, w)).astype(np.int32),
                     magnitudes=kept.magnitudes(),
                     ratio=float(r),
                 )
@@ -437,7 +438,7 @@ class PatchWavelet(TextureSynthesizer):
             terms["float64 descriptors while building the patch indexes"] = self._build_bytes(exemplar_shape)
             return terms
         oh, ow = output_shape[:2]
-        n = float(2 ** max(2, math.ceil(math.log2(max(oh, ow)))))
+        n = float(power_of_two_canvas((oh, ow), minimum=4, square=True)[0])
         grid = n * n
         levels = int(math.log2(n)) - 1
         terms["searches (largest)"] = self._transform_query_bytes(grid, levels, exemplar_shape)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..ops import as_channels, periodic_smooth_decomposition
+from ..ops.canvas import crop_to_output, padded_canvas
 from ._base import TextureSynthesizer
 from ._memory import output_bytes, pixel_count, shape_dims
 
@@ -92,7 +93,8 @@ class RandomPhase(TextureSynthesizer):
         if output_shape is None:
             terms["periodic component"] = 24.0 * k * c + 16.0 * k
             return terms
-        canvas = float(max(output_shape[0], h)) * float(max(output_shape[1], w))
+        rows, cols = padded_canvas(output_shape, minimum=(h, w))
+        canvas = float(rows) * float(cols)
         # the spectra are freed before the output is cropped, shifted and converted
         terms["embedded spot, spectra and phase"] = max(
             canvas * (40.0 * c + 28.0), 8.0 * c * pixel_count(output_shape) + output_bytes(c, output_shape)
@@ -106,7 +108,6 @@ class RandomPhase(TextureSynthesizer):
         self.spot_ = base - self.mean_
 
     def _sample(self, shape, rng, callback):
-        h, w = self.spot_.shape[:2]
-        canvas = (max(shape[0], h), max(shape[1], w))
-        out = random_phase_noise(self.spot_, canvas, rng)[: shape[0], : shape[1]]
+        canvas = padded_canvas(shape, minimum=self.spot_.shape[:2])  # at least the spot (section 4.2)
+        out = crop_to_output(random_phase_noise(self.spot_, canvas, rng), shape)
         return out + self.mean_, None

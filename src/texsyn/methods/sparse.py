@@ -27,6 +27,7 @@ import numpy as np
 from .._validation import OneOf, Range
 from ..errors import InputError
 from ..models.sparse import SparseScale, learn_sparse_model, sparse_model_from_arrays
+from ..ops.canvas import crop_to_output, padded_canvas
 from ..ops.graphcut import graphcut_reassemble
 from ..ops.histogram import HistogramMatcher
 from ..ops.linalg import matmul
@@ -266,9 +267,9 @@ class ConstrainedSparse(TextureSynthesizer):
 
     # ---------------------------------------------------------------- sample
     def _canvas(self, shape: tuple[int, int]) -> tuple[int, int]:
+        """The working canvas: whole grids of ``step`` at every scale, two patches wide or more."""
         q = self.step * 2 ** (self._scales - 1)
-        least = -(-2 * self.patch_size // self.step)
-        return (q * max(-(-shape[0] // q), least), q * max(-(-shape[1] // q), least))
+        return padded_canvas(shape, minimum=q * -(-2 * self.patch_size // self.step), multiple=q)
 
     def _sample(self, shape, rng, callback):
         """Algorithm 1, steps 3-4, from the coarsest scale to the finest (section 4.3)."""
@@ -329,7 +330,7 @@ class ConstrainedSparse(TextureSynthesizer):
                     report(outer + 1, info=info)
                 if change < self.tolerance:
                     break
-        out = u[: shape[0], : shape[1]]
+        out = crop_to_output(u, shape)
         if self.final_histogram:
             finest = self.model_.scales[0]
             out = HistogramMatcher(finest.sorted, out.shape[0] * out.shape[1], pca=finest.pca)(out, rng)

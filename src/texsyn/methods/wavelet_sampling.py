@@ -38,6 +38,7 @@ from .._validation import OneOf, Range
 from ..drivers.coarse_to_fine import coarse_to_fine
 from ..drivers.raster import grow_pixels
 from ..errors import InputError
+from ..ops.canvas import crop_to_output, padded_canvas
 from ..ops.color import ColourSpace, colour_space
 from ..ops.nonparametric import NonParametricSampler
 from ..ops.patches import as_channels
@@ -191,13 +192,13 @@ class ComplexWaveletSampling(TextureSynthesizer):
         """
         h, w, c = shape_dims(exemplar_shape)
         q = 2**self.levels
-        hc, wc = (h // q) * q, (w // q) * q
+        hc, wc = (h // q) * q, (w // q) * q  # the exemplar as _fit crops it (crop_to_multiple)
         k = float(hc * wc)
         taps = 19 if self.filters == "b" else 7
         pyramid = 32.0 * k + 8.0 * k / 4 ** (self.levels - 1)
         pad = self.window // 2 if self.candidates == "all" else 0
         top_h, top_w = hc // q + 2 * pad, wc // q + 2 * pad
-        grid = None if output_shape is None else (-(-output_shape[0] // q), -(-output_shape[1] // q))
+        grid = None if output_shape is None else self._grid(output_shape)
         kept, transient = nonparametric_bytes(top_h, top_w, 12, self.window, grid)
         terms = {"exemplar pyramids and coarsest windows": 16.0 * k * c + c * pyramid + kept}
         if output_shape is None:
@@ -215,6 +216,12 @@ class ComplexWaveletSampling(TextureSynthesizer):
             terms["local refinement"] = 84.0 * self.window**2 * full
         return terms
 
+    def _grid(self, shape: tuple[int, int]) -> tuple[int, int]:
+        """Positions of the coarsest level: the canvas (a multiple of ``2^levels``) over ``2^levels``."""
+        q = 2**self.levels
+        rows, cols = padded_canvas(shape, multiple=q)
+        return (rows // q, cols // q)
+
     def _fit(self, exemplar: np.ndarray) -> None:
         """Step 1: the DT-CWT of every channel; the coarsest subbands of Y become the search bank."""
         ex = crop_to_multiple(as_channels(exemplar), 2**self.levels)
@@ -231,8 +238,7 @@ class ComplexWaveletSampling(TextureSynthesizer):
 
     def _sample(self, shape, rng, callback):
         """Steps 2 and 3: source maps coarse to fine, then the gathered coefficients inverted."""
-        q = 2**self.levels
-        grid = (-(-shape[0] // q), -(-shape[1] // q))
+        grid = self._grid(shape)
 
         def level_step(level: int, coarser: np.ndarray | None) -> np.ndarray:
             if coarser is None:  # the coarsest level: Efros-Leung growth
@@ -252,7 +258,7 @@ class ComplexWaveletSampling(TextureSynthesizer):
         pixel = block_indices(maps[0], 2)
         pixel[..., 0] = np.minimum(pixel[..., 0], self.cropped_shape_[0] - 1)
         pixel[..., 1] = np.minimum(pixel[..., 1], self.cropped_shape_[1] - 1)
-        return image[: shape[0], : shape[1]], pixel[: shape[0], : shape[1]]
+        return crop_to_output(image, shape), crop_to_output(pixel, shape)
 
     def _grow_coarsest(
         self, grid: tuple[int, int], rng: np.random.Generator, reporter: Reporter

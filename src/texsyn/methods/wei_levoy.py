@@ -6,12 +6,12 @@ The algorithm of the paper's sections 2-3, step by step (``docs/methods/wei_levo
    neighbourhood vector: the causal L-shaped half of a ``window x window`` square at that
    level (the pixels before it in raster order) and the full ``parent_window`` square at the
    next coarser level; optionally a tree-structured vector quantiser over them
-   (:meth:`WeiLevoy._fit`, :class:`TSVQ`).
+   (:meth:`WeiLevoy._fit`, :class:`texsyn.ops.tsvq.TSVQ`).
 2. Start every level of the output pyramid as noise with the exemplar's histogram (random
    exemplar pixels) and synthesise the levels coarse to fine
    (:func:`texsyn.drivers.coarse_to_fine.coarse_to_fine`), each in raster order: every pixel
    takes the value of the exemplar pixel whose neighbourhood is nearest to its own
-   (:meth:`WeiLevoy._synthesise_level`).
+   (:meth:`WeiLevoy._synthesise_level`, :func:`texsyn.ops.search.nearest_rows` or the tree).
 
 Both images are treated toroidally, as in the paper. The search is exact, or approximate
 with the paper's tree-structured vector quantisation (``search='tsvq'``).
@@ -41,22 +41,16 @@ import numpy as np
 from .._validation import OneOf, Range
 from ..drivers.coarse_to_fine import coarse_to_fine
 from ..errors import InputError
-from ..ops.linalg import matmul
 from ..ops.patches import as_channels
 from ..ops.progress import Reporter
+from ..ops.search import nearest_rows
+from ..ops.tsvq import TSVQ
 from ..transforms.pyramids import gaussian_pyramid
+from ..transforms.steerable import pyramid_sizes
 from ._base import TextureSynthesizer
 from ._memory import output_bytes, pixel_count, shape_dims
 
-__all__ = ["WeiLevoy", "causal_offsets", "TSVQ"]
-
-
-def pyramid_sizes(shape: tuple[int, int], levels: int) -> list[tuple[int, int]]:
-    """``(height, width)`` of each level, the finest first, halved (rounded up) at each level."""
-    sizes = [(int(shape[0]), int(shape[1]))]
-    for _ in range(levels - 1):
-        sizes.append(((sizes[-1][0] + 1) // 2, (sizes[-1][1] + 1) // 2))
-    return sizes
+__all__ = ["WeiLevoy", "causal_offsets", "TSVQ"]  # TSVQ: from texsyn.ops.tsvq, kept here for 0.1 users
 
 
 def causal_offsets(window: int) -> np.ndarray:
@@ -76,63 +70,6 @@ def _gather(image: np.ndarray, rows: np.ndarray, cols: np.ndarray, offsets: np.n
     rr = (rows[:, None] + offsets[None, :, 0]) % h
     cc = (cols[:, None] + offsets[None, :, 1]) % w
     return image[rr, cc].reshape(len(rows), -1)
-
-
-class TSVQ:
-    """Tree-structured vector quantiser: recursive 2-means splits of the neighbourhoods.
-
-    A query descends to the child with the nearer centroid and is answered by an exact
-    search among the (few) vectors of the leaf it reaches (Wei and Levoy 2000, section 3).
-
-    Parameters
-    ----------
-    vectors : ndarray, shape (K, D)
-    leaf_size : int
-    rng : numpy.random.Generator
-    """
-
-    def __init__(self, vectors: np.ndarray, leaf_size: int, rng: np.random.Generator):
-        self.vectors = vectors
-        self.centroids: list[np.ndarray] = []
-        self.children: list[tuple[int, int]] = []
-        self.members: list[np.ndarray | None] = []
-        self._build(np.arange(len(vectors)), leaf_size, rng)
-
-    def _build(self, index: np.ndarray, leaf_size: int, rng) -> int:
-        node = len(self.centroids)
-        data = self.vectors[index]
-        self.centroids.append(data.mean(axis=0))
-        self.children.append((-1, -1))
-        self.members.append(None)
-        if len(index) <= leaf_size:
-            self.members[node] = index
-            return node
-        centres = data[rng.choice(len(index), 2, replace=False)]
-        for _ in range(8):  # Lloyd iterations
-            d = ((data[:, None, :] - centres[None]) ** 2).sum(-1)
-            side = np.argmin(d, axis=1)
-            if side.min() == side.max():
-                break
-            centres = np.stack([data[side == s].mean(axis=0) for s in (0, 1)])
-        if side.min() == side.max():  # identical vectors: no split possible
-            self.members[node] = index
-            return node
-        left = self._build(index[side == 0], leaf_size, rng)
-        right = self._build(index[side == 1], leaf_size, rng)
-        self.children[node] = (left, right)
-        return node
-
-    def query(self, q: np.ndarray) -> int:
-        node = 0
-        while self.members[node] is None:
-            left, right = self.children[node]
-            dl = np.sum((self.centroids[left] - q) ** 2)
-            dr = np.sum((self.centroids[right] - q) ** 2)
-            node = left if dl <= dr else right
-        idx = self.members[node]
-        assert idx is not None  # a leaf
-        d = np.sum((self.vectors[idx] - q) ** 2, axis=1)
-        return int(idx[np.argmin(d)])
 
 
 class WeiLevoy(TextureSynthesizer):
@@ -208,7 +145,7 @@ class WeiLevoy(TextureSynthesizer):
         h, w, c = shape_dims(exemplar_shape)
         causal = (self.window**2 - 1) // 2
         parent = self.parent_window**2
-        sizes = pyramid_sizes((h, w), self.levels)
+        sizes = pyramid_sizes((h, w), self.levels - 1)
         kept, peak, dims = 8.0 * h * w * c * 7 / 3, 0.0, []
         for level, (sh, sw) in enumerate(sizes):  # the finest (largest) level is built first
             k = float(sh * sw)
@@ -230,7 +167,7 @@ class WeiLevoy(TextureSynthesizer):
         oh, ow = output_shape[:2]
         slope = self.window // 2 + 1
         front = 0.0
-        out_sizes = pyramid_sizes((oh, ow), self.levels)
+        out_sizes = pyramid_sizes((oh, ow), self.levels - 1)
         for level, (sh, sw) in enumerate(out_sizes):
             n = float(min(sh, -(-sw // slope)))
             k = float(sizes[level][0] * sizes[level][1])
@@ -262,7 +199,7 @@ class WeiLevoy(TextureSynthesizer):
 
     def _sample(self, shape, rng, callback):
         """Step 2: the output pyramid, coarse to fine; the finest level and its sources."""
-        sizes = pyramid_sizes(shape, self.levels)
+        sizes = pyramid_sizes(shape, self.levels - 1)  # the output halved (rounded up) L - 1 times
         total = sum(h * w for h, w in sizes)
 
         def level_step(
@@ -331,10 +268,7 @@ class WeiLevoy(TextureSynthesizer):
             q = _gather(out, ys, xs, self.causal_)
             if parent is not None:
                 q = np.concatenate([q, _gather(parent, ys // 2, xs // 2, self.parent_)], axis=1)
-            if tree is not None:
-                best = np.array([tree.query(v) for v in q])
-            else:
-                best = np.argmin(norms[None, :] - 2.0 * matmul(q, bank.T), axis=1)
+            best = tree.nearest(q) if tree is not None else nearest_rows(q, bank, norms)
             out[ys, xs] = flat_ex[best]
             src[ys, xs] = best
             done += len(ys)

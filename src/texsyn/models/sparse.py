@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError
-from ..ops.color import ColorPCA
+from ..ops.color import ColorPCA, colour_space
 from ..ops.patches import as_channels, extract_patches
 from ..ops.sparse import constrained_matching_pursuit, ksvd
 from ..transforms.pyramids import crop_to_multiple, zoom_out
@@ -188,15 +188,15 @@ def learn_sparse_model(
         start = time.perf_counter()
         codes = constrained_matching_pursuit(patches.T, dictionary, s, None)
         timings["exemplar_codes"] += time.perf_counter() - start
-        pca = ColorPCA(image) if image.shape[2] > 1 else None
-        coords = pca.forward(image) if pca is not None else image
+        space = colour_space("pca", image)  # the histogram term's axes (section 3); grey stays grey
+        coords = space.forward(image)
         scales.append(
             SparseScale(
                 dictionary=dictionary,
                 usage=np.count_nonzero(codes, axis=1),
                 n_patches=count,
                 sorted=tuple(np.sort(coords[..., c], axis=None) for c in range(image.shape[2])),
-                pca=pca,
+                pca=space.pca,
                 mean=image.mean(axis=(0, 1)),
                 std=image.std(axis=(0, 1)),
                 image=image,
@@ -248,7 +248,7 @@ def sparse_model_from_arrays(arrays: dict[str, np.ndarray]) -> SparseModel:
                 usage=usage,
                 n_patches=int(_entry(arrays, f"s{j}_n_patches", 0)),
                 sorted=tuple(np.asarray(sorted_values, dtype=np.float64)),
-                pca=ColorPCA(image) if channels > 1 else None,
+                pca=colour_space("pca", image).pca,
                 mean=mean,
                 std=std,
                 image=image,

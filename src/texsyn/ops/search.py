@@ -12,6 +12,13 @@ clamped at zero (the terms nearly cancel for good matches).
 Queries never change these objects (``docs/architecture.md``, "Fitted state"); what one
 synthesis reuses between its queries (the energy term of a repeated mask) is in a cache that
 the caller passes in.
+
+Why this module is long: it is the one place where texsyn finds nearest patches exactly:
+FFT correlation for single masked queries, BLAS products for batches (weighted, ``k``
+nearest, nearest row), compiled folds for the both-way and the float32-screened searches.
+The expansion of the squared distance, its clamping at zero and the tie rules are written
+once here and read side by side. The approximate tree search of Wei and Levoy is
+:mod:`texsyn.ops.tsvq`.
 """
 
 from __future__ import annotations
@@ -31,6 +38,7 @@ __all__ = [
     "WeightedPatchBank",
     "knn_patches",
     "nearest_both_ways",
+    "nearest_rows",
 ]
 
 
@@ -203,6 +211,34 @@ class WeightedPatchBank:
         return np.maximum(d, 0.0, out=d)
 
 
+def _norm_less_products(queries: np.ndarray, bank: np.ndarray, bank_norm: np.ndarray) -> np.ndarray:
+    """``||b||^2 - 2 q . b`` for every query row ``q`` and bank row ``b``: ``(Q, K)``, by BLAS."""
+    return bank_norm[None, :] - 2.0 * matmul(queries, bank.T)
+
+
+def nearest_rows(queries: np.ndarray, bank: np.ndarray, bank_norm: np.ndarray | None = None) -> np.ndarray:
+    """Exact nearest bank row of every query row (unweighted SSD), in one matrix product.
+
+    The row minimising ``||b||^2 - 2 q . b``: the squared distance ``||q - b||^2`` less the
+    query's own ``||q||^2``, which is the same for every bank row and so is never computed.
+    Ties go to the lowest row.
+
+    Parameters
+    ----------
+    queries : ndarray, shape (Q, D)
+    bank : ndarray, shape (K, D)
+    bank_norm : ndarray, shape (K,), optional
+        ``np.sum(bank * bank, axis=1)``, for a caller that searches one bank many times.
+
+    Examples
+    --------
+    >>> nearest_rows(np.array([[0.9, 0.0], [0.0, 2.0]]), np.eye(2)).tolist()
+    [0, 1]
+    """
+    norm = np.sum(bank * bank, axis=1) if bank_norm is None else bank_norm
+    return np.argmin(_norm_less_products(queries, bank, norm), axis=1)
+
+
 def knn_patches(
     queries: np.ndarray, bank: np.ndarray, k: int = 1, *, block: int = 1024
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -222,7 +258,8 @@ def knn_patches(
     dist = np.empty((queries.shape[0], k))
     for start in range(0, queries.shape[0], block):
         q = queries[start : start + block]
-        d = bank_norm[None, :] - 2.0 * matmul(q, bank.T) + np.sum(q * q, axis=1)[:, None]
+        d = _norm_less_products(q, bank, bank_norm)
+        d += np.sum(q * q, axis=1)[:, None]  # the full squared distance
         np.maximum(d, 0.0, out=d)
         order = np.argsort(d, axis=1, kind="stable")[:, :k]
         idx[start : start + len(q)] = order
