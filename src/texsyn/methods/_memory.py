@@ -71,6 +71,22 @@ def fft_search_bytes(h: int, w: int, c: int, *, masks: int = 3) -> tuple[float, 
     return kept, build, query
 
 
+def fft_search_terms(
+    exemplar_shape: tuple[int, ...], *, masks: int, fitting: bool
+) -> tuple[dict[str, float], float]:
+    """Memory terms of a method whose model is one :class:`~texsyn.ops.FFTPatchSearch` of the exemplar.
+
+    Returns the terms every such method starts from (the exemplar and its spectra, plus their
+    construction when ``fitting``) and the transient bytes of one query (:func:`fft_search_bytes`).
+    """
+    h, w, c = shape_dims(exemplar_shape)
+    kept, build, query = fft_search_bytes(h, w, c, masks=masks)
+    terms = {"exemplar and its spectra": 8.0 * h * w * c + kept}
+    if fitting:
+        terms["spectra construction"] = build
+    return terms, query
+
+
 def nonparametric_bytes(
     h: int, w: int, c: int, window: int, output_shape: tuple[int, int] | None
 ) -> tuple[float, float]:

@@ -38,7 +38,7 @@ from ..ops.linalg import fixed_order
 from ..ops.patches import as_channels
 from ..ops.progress import Reporter
 from ._base import TextureSynthesizer
-from ._memory import fft_search_bytes, output_bytes, shape_dims
+from ._memory import fft_search_terms, output_bytes, shape_dims
 from ._params import ParamSpec
 from .multiscale_gaussian import MSLG, ZOOM_SIGMA  # noqa: F401  (round 1 imported ZOOM_SIGMA from here)
 from .single_scale_gaussian import (
@@ -106,12 +106,10 @@ class _LocalGaussianBase(TextureSynthesizer):
 
     def memory_terms(self, exemplar_shape, output_shape=None) -> dict[str, float]:
         """Exemplar spectra; the canvas, one FFT search and one local Gaussian (``docs/memory.md``)."""
-        h, w, c = shape_dims(exemplar_shape)
-        kept, build, query = fft_search_bytes(h, w, c, masks=9)
-        terms = {"exemplar and its spectra": 8.0 * h * w * c + kept}
+        terms, query = fft_search_terms(exemplar_shape, masks=9, fitting=output_shape is None)
         if output_shape is None:
-            terms["spectra construction"] = build
             return terms
+        h, w, c = shape_dims(exemplar_shape)
         n = self.patch_size
         canvas = block_canvas(output_shape[:2], n, n - self._overlap_px())
         m = min(self.n_neighbors, max(1, (h - n + 1) * (w - n + 1)))

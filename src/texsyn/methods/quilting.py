@@ -15,7 +15,7 @@ from ..ops.progress import Reporter
 from ..ops.seams import cut_mask
 from ..ops.search import FFTPatchSearch
 from ._base import TextureSynthesizer
-from ._memory import fft_search_bytes, output_bytes, shape_dims
+from ._memory import fft_search_terms, output_bytes, shape_dims
 
 __all__ = ["Quilting"]
 
@@ -94,12 +94,10 @@ class Quilting(TextureSynthesizer):
 
         See ``docs/memory.md``.
         """
-        h, w, c = shape_dims(exemplar_shape)
-        kept, build, query = fft_search_bytes(h, w, c, masks=3)
-        terms = {"exemplar and its spectra": 8.0 * h * w * c + kept}
+        terms, query = fft_search_terms(exemplar_shape, masks=3, fitting=output_shape is None)
         if output_shape is None:
-            terms["spectra construction"] = build
             return terms
+        c = shape_dims(exemplar_shape)[2]
         rows, cols = block_canvas(output_shape, self.patch_size, self.patch_size - self._overlap())
         terms["one block search"] = query
         terms["canvas and source map"] = float(rows) * cols * (8.0 * c + 8.0)
