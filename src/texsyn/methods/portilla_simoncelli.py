@@ -36,7 +36,7 @@ from ..models.portilla_projections import (
     impose_pixel_statistics,
     shrink_highpass,
 )
-from ..ops.canvas import crop_to_output, padded_canvas
+from ..ops.canvas import crop_to_output, extend_to_canvas, padded_canvas
 from ..ops.color import ColourSpace, colour_space
 from ..ops.fourier import periodic_smooth_decomposition
 from ..ops.linalg import fixed_order
@@ -310,7 +310,7 @@ class PortillaSimoncelli(TextureSynthesizer):
             exemplar.shape, (h, w), task=f"refining a {w}x{h} image", advice="use a smaller image"
         )
         ch, cw = self._canvas((h, w))
-        padded = np.pad(as_channels(img), ((0, ch - h), (0, cw - w), (0, 0)), mode="symmetric")
+        padded = extend_to_canvas(as_channels(img), (ch, cw), mode="symmetric")
         iterations = self.n_iterations if n_iterations is None else int(n_iterations)
         out = self._run(self._to_channels(padded), iterations, callback)
         return self._as_output(crop_to_output(self._to_image(out), (h, w)))
