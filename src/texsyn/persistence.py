@@ -25,10 +25,9 @@ pickle), reads each array's ``.npy`` header before its data and refuses, with on
 arrays that declare more bytes than the file could hold (:data:`MAX_COMPRESSION_RATIO`),
 all before allocating them.
 
-Why this module is long: the file format has two sides, writing and reading, and the reading
-side is the one place a file from someone else enters texsyn; its checks (the archive, each
-array's declared size, the header, texsyn 0.1's layout) are kept beside the format they
-check, so that a change of the format and of its checks is one change.
+The archive itself is read by :class:`texsyn.io.arrays.NpzArchive` (headers first, no pickle,
+sizes checked); this module checks what a model file must hold: its header, its exemplar and
+texsyn 0.1's layout.
 
 Files written by texsyn 0.1's ``texsyn.io.save_fitted`` (the ``sparse`` method only) are
 read too.
@@ -37,23 +36,20 @@ read too.
 from __future__ import annotations
 
 import json
-import math
 import os
-import stat
 import warnings
-import zipfile
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import Any
 
 import numpy as np
 
-from ._validation import as_exemplar, check_memory, human_bytes
+from ._validation import as_exemplar
 from ._version import __version__
-from .errors import InputError, InputFileNotFoundError, MemoryLimitError
+from .errors import InputError, MemoryLimitError
 from .io import OutputSet, max_image_pixels
+from .io.arrays import COMPRESSION_FLOOR_BYTES, MAX_COMPRESSION_RATIO, NpzArchive
 from .io.budget import MAX_PIXELS_ENV
-from .io.files import pixel_amount, show_path
+from .io.files import pixel_amount
 from .methods import METHODS, TextureSynthesizer
 
 __all__ = [
@@ -75,19 +71,8 @@ SUFFIX = ".npz"
 #: the longest JSON header (and texsyn 0.1 parameter text) a file may hold, in characters;
 #: a real header is under 2,000
 MAX_HEADER_CHARS = 1_000_000
-#: the largest ratio of the bytes a file's arrays declare to the file's length. :func:`save`
-#: compresses with DEFLATE, which cannot exceed 1032:1 (a constant exemplar comes close), so
-#: every saved model passes; a small file declaring more (other zip compressions such as
-#: bzip2 reach millions to one) is refused as a decompression bomb before anything is read
-MAX_COMPRESSION_RATIO = 1100
-#: files whose arrays declare at most this many bytes are accepted whatever their compression
-COMPRESSION_FLOOR_BYTES = 1 << 20
 _FITTED = "fitted/"
 _LEGACY_KEYS = ("format_version", "method", "params", "exemplar")
-_ZIP_MAGIC = (b"PK\x03\x04", b"PK\x05\x06")  # a local file header; an empty archive
-_NPY_HEADER_BYTES = 10_000  # numpy's own limit of an .npy header
-_DTYPE_KINDS = "biufcUS"  # numbers and text: no objects, records or raw bytes
-_MAX_ARRAYS = 4096  # a sparse model holds 7 per scale
 
 
 def _plain(value: Any, where: str) -> Any:
@@ -166,154 +151,6 @@ def save(model: TextureSynthesizer, path: str | os.PathLike, *, overwrite: bool 
 # --------------------------------------------------------------------------- reading
 
 
-def _one_line(exc: BaseException) -> str:
-    """A library's complaint in one short line."""
-    return (" ".join(str(exc).split()) or type(exc).__name__)[:120]
-
-
-@dataclass(frozen=True)
-class _Member:
-    """One array of an archive as its ``.npy`` header declares it (no data read)."""
-
-    info: zipfile.ZipInfo
-    shape: tuple[int, ...]
-    dtype: np.dtype
-
-    @property
-    def nbytes(self) -> int:
-        return math.prod(self.shape) * self.dtype.itemsize
-
-
-class _Archive:
-    """An ``.npz`` file opened for reading: its arrays' headers read and checked, data on demand.
-
-    Every failure is an :class:`~texsyn.errors.InputError` naming the file.
-    """
-
-    def __init__(self, path: Path) -> None:
-        self.path = path
-        self.name = show_path(path)
-        self._fh = fh = self._open()
-        try:
-            self.file_size = os.fstat(fh.fileno()).st_size
-            if fh.read(4) not in _ZIP_MAGIC:
-                raise self.refuse("not an .npz archive")
-            fh.seek(0)
-            self.zip = zipfile.ZipFile(fh)
-        except InputError:
-            fh.close()
-            raise
-        except Exception as exc:  # damaged or truncated archives: zipfile, OSError
-            fh.close()
-            raise self.refuse(f"a damaged or truncated .npz archive: {_one_line(exc)}") from None
-        try:
-            self.members = self._scan()
-        except BaseException:
-            self.close()
-            raise
-
-    def refuse(self, why: str) -> InputError:
-        return InputError(f"'{self.name}' is not a saved texsyn model ({why})")
-
-    def _open(self) -> BinaryIO:
-        """The file, opened for reading; never a folder, a pipe or a device (a read could block)."""
-        try:  # without blocking: opening a pipe waits for a writer
-            fd = os.open(self.path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
-        except FileNotFoundError:
-            raise InputFileNotFoundError(f"no such file: '{self.name}'") from None
-        except OSError as exc:
-            raise InputError(f"cannot read '{self.name}' ({exc.strerror or type(exc).__name__})") from None
-        mode = os.fstat(fd).st_mode
-        if not stat.S_ISREG(mode):
-            os.close(fd)
-            if stat.S_ISDIR(mode):
-                raise InputError(f"'{self.name}' is a folder, not a saved texsyn model")
-            raise self.refuse("not a regular file: a device, pipe or socket")
-        return os.fdopen(fd, "rb")
-
-    def _scan(self) -> dict[str, _Member]:
-        """The ``.npy`` header of every array in the archive, read without its data."""
-        infos = [info for info in self.zip.infolist() if info.filename.endswith(".npy")]
-        if len(infos) > _MAX_ARRAYS:  # np.savez writes .npy members only; others are never read
-            raise self.refuse(f"it holds {len(infos)} arrays, more than the {_MAX_ARRAYS} texsyn allows")
-        members: dict[str, _Member] = {}
-        for info in infos:
-            key = info.filename[: -len(".npy")]
-            if info.compress_type not in (zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED):
-                raise self.refuse(
-                    f"its array {key!r:.60} is compressed in a way numpy never writes (zip method "
-                    f"{info.compress_type})"
-                )
-            try:
-                with self.zip.open(info) as fp:
-                    version = np.lib.format.read_magic(fp)
-                    if version == (1, 0):
-                        shape, _, dtype = np.lib.format.read_array_header_1_0(fp, _NPY_HEADER_BYTES)
-                    elif version == (2, 0):
-                        shape, _, dtype = np.lib.format.read_array_header_2_0(fp, _NPY_HEADER_BYTES)
-                    else:
-                        raise ValueError(f".npy format version {version[0]}.{version[1]} is not supported")
-            except Exception as exc:  # zipfile, zlib, numpy format errors (RecursionError too)
-                raise self.refuse(f"its array {key!r:.60} is unreadable: {_one_line(exc)}") from None
-            if dtype.hasobject:
-                raise self.refuse(
-                    f"its array {key!r:.60} holds Python objects, which texsyn never saves nor loads"
-                )
-            if dtype.kind not in _DTYPE_KINDS or dtype.fields is not None or dtype.subdtype is not None:
-                raise self.refuse(
-                    f"its array {key!r:.60} has the data type {dtype}, which texsyn never saves"
-                )
-            if any(n < 0 for n in shape):
-                raise self.refuse(f"its array {key!r:.60} declares the shape {shape}")
-            members[key] = _Member(info, tuple(shape), dtype)
-        return members
-
-    def check_sizes(self, keys: list[str]) -> None:
-        """Refuse arrays whose data the file cannot hold or memory cannot take, before reading them."""
-        need = sum(self.members[k].nbytes for k in keys)
-        if need > max(COMPRESSION_FLOOR_BYTES, MAX_COMPRESSION_RATIO * self.file_size):
-            raise InputError(
-                f"'{self.name}' declares {human_bytes(need)} of arrays in {self.file_size} bytes, over "
-                f"{MAX_COMPRESSION_RATIO}:1: refused as a decompression bomb"
-            )
-        check_memory(
-            need, what=f"loading the arrays of '{self.name}'", advice="load it on a machine with more memory"
-        )
-
-    def read(self, key: str) -> np.ndarray:
-        """The array ``key``; refused if it declares more bytes than its archive member holds."""
-        member = self.members[key]
-        if member.nbytes > member.info.file_size:
-            raise self.refuse(
-                f"its array {key!r:.60} declares {human_bytes(member.nbytes)} but holds "
-                f"{member.info.file_size} bytes: truncated or forged"
-            )
-        try:
-            with self.zip.open(member.info) as fp:
-                return np.lib.format.read_array(fp, allow_pickle=False, max_header_size=_NPY_HEADER_BYTES)
-        except Exception as exc:  # damaged data: zipfile (CRC), zlib, EOF, numpy
-            raise self.refuse(f"its array {key!r:.60} is damaged: {_one_line(exc)}") from None
-
-    def text(self, key: str, what: str) -> str:
-        """The 0-d text array ``key`` (a JSON header, a method name), at most MAX_HEADER_CHARS long."""
-        member = self.members[key]
-        if member.dtype.kind != "U" or member.shape != ():
-            raise self.refuse(f"its {what} is not a text")
-        if member.dtype.itemsize > 4 * MAX_HEADER_CHARS:
-            raise self.refuse(f"its {what} is over {MAX_HEADER_CHARS:,} characters long")
-        return str(self.read(key)[()])
-
-    def close(self) -> None:
-        self.zip.close()  # leaves the file object it was given open
-        self._fh.close()
-
-    def __enter__(self) -> _Archive:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-
 def _json(text: str) -> Any:
     """The JSON value of ``text``, or None when it is not JSON (or nested too deeply)."""
     try:
@@ -322,17 +159,17 @@ def _json(text: str) -> Any:
         return None
 
 
-def _header(archive: _Archive) -> tuple[dict, list[str]]:
+def _header(archive: NpzArchive) -> tuple[dict, list[str]]:
     """The header of a file (of this format or of texsyn 0.1's) and the keys of its fitted arrays."""
     members = archive.members
     if "header" in members:
-        header = _json(archive.text("header", "header"))
+        header = _json(archive.text("header", "header", MAX_HEADER_CHARS))
         if not isinstance(header, dict) or header.get("format") != FORMAT_NAME:
             raise archive.refuse(f"its header is not a {FORMAT_NAME} header")
         fitted = [k for k in members if k.startswith(_FITTED)]
     elif all(k in members for k in _LEGACY_KEYS):  # texsyn 0.1: io.save_fitted of 'sparse'
-        params = _json(archive.text("params", "texsyn 0.1 header"))
-        method = archive.text("method", "texsyn 0.1 method name")
+        params = _json(archive.text("params", "texsyn 0.1 header", MAX_HEADER_CHARS))
+        method = archive.text("method", "texsyn 0.1 method name", MAX_HEADER_CHARS)
         stored = members["format_version"]
         if stored.shape != () or stored.dtype.kind not in "iu":
             raise archive.refuse("unreadable texsyn 0.1 header")
@@ -359,7 +196,7 @@ def _header(archive: _Archive) -> tuple[dict, list[str]]:
     return header, fitted
 
 
-def _check_exemplar(archive: _Archive, model: TextureSynthesizer) -> tuple[int, ...]:
+def _check_exemplar(archive: NpzArchive, model: TextureSynthesizer) -> tuple[int, ...]:
     """The declared shape of the stored exemplar, refused (unread) when it is over the budgets."""
     member = archive.members.get("exemplar")
     if member is None or len(member.shape) not in (2, 3) or member.dtype.kind not in "uif":
@@ -420,7 +257,7 @@ def load(path: str | os.PathLike, **params: Any) -> TextureSynthesizer:
     >>> load(path, n_iterations=2).n_iterations
     2
     """
-    with _Archive(Path(path)) as archive:
+    with NpzArchive(Path(path), "a saved texsyn model") as archive:
         header, fitted_keys = _header(archive)
         name = header.get("method")
         if not isinstance(name, str) or name not in METHODS:

@@ -23,8 +23,9 @@ import numpy as np
 
 from .. import data
 from .._version import __version__
-from ..errors import InputError, InputFileNotFoundError
+from ..errors import InputError
 from ..io import OutputSet, check_image_size, max_image_pixels, read_image, read_image_header
+from ..io.arrays import load_npy
 from ..io.writing import ARRAY_FORMATS, WRITE_FORMATS
 from ..ops.canvas import default_output_shape
 from .options import BUILTIN_PREFIX
@@ -77,14 +78,7 @@ def load_exemplar(exemplar: str | None) -> tuple[np.ndarray, str]:
 def read_flow(path: str) -> np.ndarray:
     """A flow field from a .npy array (H, W, 2) or from the red/green channels of an image."""
     if Path(path).suffix.lower() == ".npy":
-        if not Path(path).is_file():
-            raise InputFileNotFoundError(f"no such file: '{path}'")
-        try:
-            flow = np.load(path, allow_pickle=False)
-        except (ValueError, OSError) as exc:
-            raise InputError(
-                f"cannot read '{path}' as a NumPy array ({' '.join(str(exc).split())})"
-            ) from None
+        flow = load_npy(path, "a flow array")  # header first: no pickle, no bomb, no pipe
         if flow.ndim != 3 or flow.shape[2] != 2 or flow.dtype.kind not in "iuf":
             raise InputError(
                 f"flow array '{path}' must be real numbers of shape (H, W, 2), got {flow.dtype} {flow.shape}"
