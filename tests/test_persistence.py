@@ -250,7 +250,7 @@ def test_an_exemplar_declared_over_the_pixel_budget_is_refused_unread(tmp_path, 
 def test_the_exemplar_budgets_of_image_files_and_of_the_method_apply(saved_random_phase, monkeypatch):
     path = saved_random_phase[1]
     monkeypatch.setenv("TEXSYN_MAX_PIXELS", "100")
-    _refused(path, "more than the 100 allowed; set TEXSYN_MAX_PIXELS=")
+    assert _refused(path, "more than the 100 allowed; set TEXSYN_MAX_PIXELS=")
     monkeypatch.delenv("TEXSYN_MAX_PIXELS")
     monkeypatch.setenv("TEXSYN_MEMORY_LIMIT", "1M")
     message = _refused(path, "rp.npz.*random_phase.*fitting.*TEXSYN_MEMORY_LIMIT", MemoryLimitError)
@@ -262,23 +262,25 @@ def test_learned_arrays_over_the_memory_limit_are_refused_unread(tmp_path, monke
     members = {"header": _header(), "exemplar": _npy(_SMALL), "fitted/s0_dictionary": _npy(big)}
     path = _archive(tmp_path / "learned.npz", members, zipfile.ZIP_STORED)
     monkeypatch.setenv("TEXSYN_MEMORY_LIMIT", "2M")
-    _refused(path, "loading the arrays of .*learned.npz.*TEXSYN_MEMORY_LIMIT", MemoryLimitError)
+    assert _refused(path, "loading the arrays of .*learned.npz.*TEXSYN_MEMORY_LIMIT", MemoryLimitError)
 
 
 def test_arrays_declaring_more_than_the_file_can_hold_are_refused(tmp_path, monkeypatch):
     monkeypatch.setenv("TEXSYN_MEMORY_LIMIT", "64G")  # the size checks, not the memory limit
     bomb = _archive(tmp_path / "bomb.npz", {"header": _header(), "exemplar": _npy(shape=(3000, 3000))})
-    _refused(bomb, r"declares 68.7 MiB of arrays in \d+ bytes, over 1100:1: refused as a decompression bomb")
+    assert _refused(
+        bomb, r"declares 68.7 MiB of arrays in \d+ bytes, over 1100:1: refused as a decompression bomb"
+    )
     cut = _archive(tmp_path / "cut.npz", {"header": _header(), "exemplar": _npy(shape=(100, 100, 3))})
-    _refused(cut, "array 'exemplar' declares 234.4 KiB but holds 128 bytes: truncated or forged")
+    assert _refused(cut, "array 'exemplar' declares 234.4 KiB but holds 128 bytes: truncated or forged")
     short = _archive(tmp_path / "short.npz", {"header": _header(), "exemplar": _npy(_SMALL)[:-8]})
-    _refused(short, "array 'exemplar'")
+    assert _refused(short, "array 'exemplar'")
 
 
 def test_a_compression_numpy_never_writes_is_refused(tmp_path):
     members = {"header": _header(), "exemplar": _npy(_SMALL)}
     path = _archive(tmp_path / "bz.npz", members, zipfile.ZIP_BZIP2)
-    _refused(path, "compressed in a way numpy never writes")
+    assert _refused(path, "compressed in a way numpy never writes")
 
 
 @pytest.mark.parametrize("member", ["header", "exemplar", "fitted/s0_dictionary"])
@@ -289,7 +291,7 @@ def test_python_objects_are_refused_from_the_array_header(tmp_path, member):
         member: _npy(shape=(2,), descr="|O", data=b"x" * 16),
     }
     path = _archive(tmp_path / "objects.npz", members)
-    _refused(path, f"array '{member}' holds Python objects")
+    assert _refused(path, f"array '{member}' holds Python objects")
 
 
 @pytest.mark.parametrize(
@@ -302,7 +304,7 @@ def test_python_objects_are_refused_from_the_array_header(tmp_path, member):
 )
 def test_a_deeply_nested_header_is_refused(tmp_path, text, match):
     path = _archive(tmp_path / "nested.npz", {"header": _npy(np.array(text)), "exemplar": _npy(_SMALL)})
-    _refused(path, match)
+    assert _refused(path, match)
 
 
 def test_a_deeply_nested_texsyn_0_1_header_is_refused(tmp_path):
@@ -312,12 +314,12 @@ def test_a_deeply_nested_texsyn_0_1_header_is_refused(tmp_path):
         "params": _npy(np.array("[" * 100_000)),
         "exemplar": _npy(_SMALL),
     }
-    _refused(_archive(tmp_path / "old.npz", members), "parameters are not a mapping")
+    assert _refused(_archive(tmp_path / "old.npz", members), "parameters are not a mapping")
 
 
 def test_a_header_over_a_million_characters_is_refused_unread(tmp_path):
     members = {"header": _npy(shape=(), descr="<U50000000"), "exemplar": _npy(_SMALL)}
-    _refused(_archive(tmp_path / "long.npz", members), "header is over 1,000,000 characters long")
+    assert _refused(_archive(tmp_path / "long.npz", members), "header is over 1,000,000 characters long")
 
 
 @pytest.mark.parametrize(
@@ -337,8 +339,8 @@ def test_a_file_that_is_not_an_archive_gets_our_own_message(tmp_path, monkeypatc
 def test_a_pipe_is_refused_without_waiting_for_a_writer(tmp_path):
     path = tmp_path / "pipe.npz"
     os.mkfifo(path)
-    _refused(path, "not a regular file")
-    _refused(tmp_path, "is a folder")
+    assert _refused(path, "not a regular file")
+    assert _refused(tmp_path, "is a folder")
 
 
 def test_every_refusal_is_an_input_error_that_front_doors_map_to_exit_2():
