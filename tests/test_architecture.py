@@ -3,7 +3,9 @@
 - a module imports only from lower layers (or from its own package); a function whose
   docstring starts "Deprecated" (a shim keeping an old name working) may import lazily from
   above, and a module whose docstring starts "Deprecated alias" is exempt; dynamic imports
-  (``importlib.import_module``) count as imports;
+  (``importlib.import_module``, aliased or relative) and modules reached through attribute
+  chains (``texsyn.methods`` after ``import texsyn.ops``) count as imports; ``sys.modules``,
+  ``exec`` and ``getattr`` with strings are not followed;
 - no module uses another module's private (``_name``) names, nor a private module of another
   package (``from texsyn.methods import _base`` outside ``texsyn.methods``);
 - no module is over 400 lines without a paragraph at its top saying why.
@@ -106,10 +108,64 @@ def _in_shim(node: ast.AST, parents: dict[ast.AST, ast.AST]) -> bool:
     return False
 
 
+def _importers(tree: ast.AST) -> tuple[set[str], set[str]]:
+    """Local names of ``importlib.import_module`` and of the ``importlib`` module, aliases included."""
+    functions, modules = {"__import__"}, {"importlib"}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.module == "importlib":
+            functions |= {a.asname or a.name for a in node.names if a.name == "import_module"}
+        elif isinstance(node, ast.Import):
+            modules |= {a.asname or a.name for a in node.names if a.name == "importlib"}
+    return functions, modules
+
+
+def _dynamic_target(node: ast.Call, module: str, path: Path) -> str:
+    """The module a call of ``import_module(name, package)`` / ``__import__`` imports."""
+    arg = node.args[0] if node.args else None
+    if not (isinstance(arg, ast.Constant) and isinstance(arg.value, str)):
+        return "<computed>"
+    name = arg.value
+    level = len(name) - len(name.lstrip("."))
+    if not level:
+        return name
+    package_arg = (
+        node.args[1]
+        if len(node.args) > 1
+        else next((k.value for k in node.keywords if k.arg == "package"), None)
+    )
+    if isinstance(package_arg, ast.Constant) and isinstance(package_arg.value, str):
+        package = package_arg.value
+    elif isinstance(package_arg, ast.Name) and package_arg.id in ("__name__", "__package__"):
+        package = module if package_arg.id == "__name__" else _package(module, path)
+    else:
+        return "<computed>"
+    base = package.split(".")
+    base = base[: len(base) - (level - 1)]
+    return ".".join(base + ([name.lstrip(".")] if name.lstrip(".") else []))
+
+
+def _bound_modules(module: str, path: Path, tree: ast.AST) -> dict[str, str]:
+    """Local names bound to texsyn modules by import statements (``import texsyn.x`` binds ``texsyn``)."""
+    bound: dict[str, str] = {}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            target = _resolve(module, path.name == "__init__.py", node.level, node.module)
+            for alias in node.names:
+                if f"{target}.{alias.name}" in NAMES:
+                    bound[alias.asname or alias.name] = f"{target}.{alias.name}"
+        elif isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.name.startswith("texsyn"):
+                    bound[alias.asname or alias.name.split(".")[0]] = alias.name if alias.asname else "texsyn"
+    return bound
+
+
 def _imports(module: str, path: Path) -> list[Import]:
     tree = ast.parse(path.read_text())
     parents = _parents(tree)
     is_package = path.name == "__init__.py"
+    functions, importlib_names = _importers(tree)
+    bound = _bound_modules(module, path, tree)
     out = []
     for node in ast.walk(tree):
         shim = _in_shim(node, parents)
@@ -125,16 +181,23 @@ def _imports(module: str, path: Path) -> list[Import]:
             ]
         elif isinstance(node, ast.Call):
             func = node.func
-            called = func.attr if isinstance(func, ast.Attribute) else getattr(func, "id", "")
-            if called in ("import_module", "__import__"):
-                arg = node.args[0] if node.args else None
-                if isinstance(arg, ast.Constant) and isinstance(arg.value, str):
-                    name = arg.value
-                    level = len(name) - len(name.lstrip("."))
-                    target = _resolve(module, is_package, level, name.lstrip(".") or None) if level else name
-                else:
-                    target = "<computed>"
-                out.append(Import(node.lineno, target, None, shim, dynamic=True))
+            dynamic = (isinstance(func, ast.Name) and func.id in functions) or (
+                isinstance(func, ast.Attribute)
+                and func.attr == "import_module"
+                and isinstance(func.value, ast.Name)
+                and func.value.id in importlib_names
+            )
+            if dynamic:
+                out.append(Import(node.lineno, _dynamic_target(node, module, path), None, shim, dynamic=True))
+        elif isinstance(node, ast.Attribute) and not isinstance(parents.get(node), ast.Attribute):
+            chain = _attribute_chain(node)  # the longest chain only: texsyn.methods.x, not texsyn.methods
+            if chain and chain[0] in bound:
+                current = bound[chain[0]]
+                for attr in chain[1:]:
+                    if f"{current}.{attr}" not in NAMES:
+                        break
+                    current = f"{current}.{attr}"
+                    out.append(Import(node.lineno, current, None, shim, dynamic=True))
     return out
 
 
@@ -204,7 +267,6 @@ def private_uses(module: str, path: Path) -> list[str]:
     """Uses of other modules' private names or private modules by ``module``."""
     package = _package(module, path)
     wrong = []
-    bound: dict[str, str] = {}  # local name -> texsyn module it is bound to
     tree = ast.parse(path.read_text())
     for imp in _imports(module, path):
         if imp.dynamic:
@@ -215,17 +277,7 @@ def private_uses(module: str, path: Path) -> list[str]:
             wrong.append(f"{path.name}:{imp.line} imports the private module {private}")
         if imp.name and imp.name.startswith("_") and not imp.name.startswith("__") and full not in NAMES:
             wrong.append(f"{path.name}:{imp.line} takes {imp.name} from {imp.target}")
-    for node in ast.walk(tree):
-        if isinstance(node, ast.ImportFrom):
-            target = _resolve(module, path.name == "__init__.py", node.level, node.module)
-            for alias in node.names:
-                if f"{target}.{alias.name}" in NAMES:
-                    bound[alias.asname or alias.name] = f"{target}.{alias.name}"
-        elif isinstance(node, ast.Import):
-            for alias in node.names:
-                if alias.name.startswith("texsyn"):
-                    key = alias.asname or alias.name.split(".")[0]
-                    bound[key] = alias.name if alias.asname else "texsyn"
+    bound = _bound_modules(module, path, tree)
     for node in ast.walk(tree):
         if not isinstance(node, ast.Attribute):
             continue
@@ -269,6 +321,22 @@ VIOLATIONS = [
     ("texsyn.metrics.fake", "import texsyn.ops.search\nX = texsyn.ops.search._x\n", private_uses),
     ("texsyn.metrics.fake", "from texsyn import ops\nX = ops.search._x\n", private_uses),
     ("texsyn.ops.fake", "from .search import _fold_minima\n", private_uses),
+    (
+        "texsyn.ops.fake",
+        "import importlib\nM = importlib.import_module('.methods', 'texsyn')\n",
+        upward_imports,
+    ),
+    (
+        "texsyn.ops.fake",
+        "from importlib import import_module as im\nM = im('texsyn.methods')\n",
+        upward_imports,
+    ),
+    ("texsyn.ops.fake", "import texsyn.ops\nX = texsyn.methods.METHODS\n", upward_imports),
+    (
+        "texsyn.ops.fake",
+        "import importlib\nM = importlib.import_module('..methods', __package__)\n",
+        upward_imports,
+    ),
 ]
 
 

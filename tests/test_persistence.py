@@ -259,7 +259,7 @@ def test_the_exemplar_budgets_of_image_files_and_of_the_method_apply(saved_rando
 
 def test_learned_arrays_over_the_memory_limit_are_refused_unread(tmp_path, monkeypatch):
     big = np.random.default_rng(0).random((320, 1000))  # 2.5 MiB
-    members = {"header": _header(), "exemplar": _npy(_SMALL), "fitted/s0_dictionary": _npy(big)}
+    members = {"header": _header("sparse"), "exemplar": _npy(_SMALL), "fitted/s0_dictionary": _npy(big)}
     path = _archive(tmp_path / "learned.npz", members, zipfile.ZIP_STORED)
     monkeypatch.setenv("TEXSYN_MEMORY_LIMIT", "2M")
     assert _refused(path, "loading the arrays of .*learned.npz.*TEXSYN_MEMORY_LIMIT", MemoryLimitError)
@@ -347,3 +347,38 @@ def test_every_refusal_is_an_input_error_that_front_doors_map_to_exit_2():
     # texsyn.cli.report_error gives exit status 2 exactly for InputError (docs/errors.md)
     assert issubclass(InputError, ValueError)
     assert issubclass(MemoryLimitError, InputError) and issubclass(InputFileNotFoundError, InputError)
+
+
+def test_arrays_a_method_never_stores_are_refused_before_they_are_read(tmp_path, monkeypatch):
+    monkeypatch.setenv("TEXSYN_MEMORY_LIMIT", "64G")  # the name check, not the memory limit
+    junk = _npy(shape=(64 * 2**20,), descr="|u1", data=bytes(64 * 2**20))  # deflates to ~64 KiB
+    members = {"header": _header(), "exemplar": _npy(_SMALL), "fitted/junk": junk}
+    path = _archive(tmp_path / "junk.npz", members)
+    assert "holds no arrays named 'junk'" in _refused(path, "random_phase")
+    odd = {"header": _header(), "exemplar": _npy(_SMALL), "fitted/\x1b[31mred\n\rx": _npy(_SMALL)}
+    message = _refused(_archive(tmp_path / "odd.npz", odd), "holds no arrays named")
+    assert "\x1b" not in message and "\r" not in message
+
+
+FORGERIES = {
+    "atom-size": lambda a: {
+        "s0_dictionary": np.zeros((4 * a["s0_dictionary"].shape[0], a["s0_dictionary"].shape[1]))
+    },
+    "empty-histogram": lambda a: {"s0_sorted": np.zeros((a["s0_sorted"].shape[0], 0))},
+    "nan": lambda a: {"s0_dictionary": np.full(a["s0_dictionary"].shape, np.nan)},
+    "negative-usage": lambda a: {"s0_usage": -np.ones_like(a["s0_usage"])},
+}
+
+
+@pytest.mark.parametrize("forgery", sorted(FORGERIES))
+def test_forged_sparse_arrays_are_refused_at_load_not_at_sample(tmp_path, colour_exemplar, forgery):
+    model = fast_method("sparse").fit(colour_exemplar)
+    path = texsyn.save(model, tmp_path / "sparse.npz")
+    with np.load(path, allow_pickle=False) as stored:
+        members = {k: stored[k] for k in stored.files}
+    forged = FORGERIES[forgery](model.fitted_arrays())
+    members.update({f"fitted/{k}": v for k, v in forged.items()})
+    with open(path, "wb") as fh:
+        np.savez_compressed(fh, **members)
+    with pytest.raises(InputError, match="saved sparse model"):
+        texsyn.load(path)

@@ -183,3 +183,24 @@ def test_patch_wavelet_round1_callbacks(small):
     )
     assert [T.shape[:2] for _, _, T in inverse_calls] == [(2, 2), (4, 4), (8, 8)]
     np.testing.assert_array_equal(inverse_calls[-1][2], rebuilt)
+
+
+def test_moved_modules_are_reached_as_attributes_with_one_warning_at_the_users_line(tmp_path):
+    """``texsyn.ops.dtcwt`` (no import statement) and ``from texsyn.io import save_fitted`` warn
+    once each, naming the user's script, under Python's default warning filters."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "old_user.py"
+    script.write_text(
+        "import texsyn\n"
+        "print(texsyn.ops.dtcwt.DTCWT.__name__, texsyn.ops.steerable.SteerablePyramid.__name__)\n"
+        "from texsyn.io import save_fitted\n"
+    )
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["DTCWT", "SteerablePyramid"]
+    lines = [line for line in done.stderr.splitlines() if "DeprecationWarning" in line]
+    assert len(lines) == 3, done.stderr
+    assert all(line.startswith(f"{script}:") for line in lines), done.stderr
+    assert sum("texsyn.io.save_fitted" in line for line in lines) == 1

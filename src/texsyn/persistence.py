@@ -291,6 +291,7 @@ def load(path: str | os.PathLike, **params: Any) -> TextureSynthesizer:
                 values[key] = tuple(values[key])
         model = cls(**values)
         _check_exemplar(archive, model)
+        model.check_fitted_names([k[len(_FITTED) :] if k.startswith(_FITTED) else k for k in fitted_keys])
         archive.check_sizes(["exemplar", *fitted_keys])
         exemplar = as_exemplar(archive.read("exemplar"), name=f"the exemplar in '{archive.name}'")
         fitted = {k[len(_FITTED) :] if k.startswith(_FITTED) else k: archive.read(k) for k in fitted_keys}

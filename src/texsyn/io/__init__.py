@@ -11,6 +11,7 @@ saved with :func:`texsyn.save` and loaded with :func:`texsyn.load` (``docs/persi
 """
 
 import importlib
+import sys
 import warnings
 
 from ..errors import ImageReadError
@@ -54,12 +55,13 @@ _DEPRECATED = {
 
 def __getattr__(name: str):
     """Deprecated names of :data:`_DEPRECATED`: resolved lazily, with a warning."""
-    if name in _DEPRECATED:
-        warnings.warn(
-            f"texsyn.io.{name} is deprecated; use {_DEPRECATED[name]}", DeprecationWarning, stacklevel=2
-        )
-        with warnings.catch_warnings():  # the alias module's own warning would repeat this one
-            warnings.simplefilter("ignore", DeprecationWarning)
-            module = importlib.import_module(".fitted", __name__)
-        return getattr(module, name)
+    if name in _DEPRECATED or name == "fitted":
+        module = sys.modules.get(f"{__name__}.fitted")
+        if module is None:
+            with warnings.catch_warnings():  # the alias module's own warning would repeat ours
+                warnings.simplefilter("ignore", DeprecationWarning)
+                module = importlib.import_module(".fitted", __name__)
+        use = _DEPRECATED.get(name, "texsyn.save and texsyn.load")
+        warnings.warn(f"texsyn.io.{name} is deprecated; use {use}", DeprecationWarning, stacklevel=2)
+        return module if name == "fitted" else getattr(module, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -14,6 +14,7 @@ attributes ending in ``_``; ``sample`` never changes them, and :func:`texsyn.sav
 from __future__ import annotations
 
 import functools
+import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -81,6 +82,8 @@ class TextureSynthesizer:
     #: parameters that change what ``fit`` learns, for methods whose saved models hold the
     #: learned arrays (:meth:`fitted_arrays`): :func:`texsyn.load` refuses new values for them
     learned_params: ClassVar[tuple[str, ...]] = ()
+    #: the names of :meth:`fitted_arrays` (``None``: the method stores none)
+    fitted_names: ClassVar[re.Pattern[str] | None] = None
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -248,29 +251,29 @@ class TextureSynthesizer:
 
     # ------------------------------------------------------------------ saved models
     def fitted_arrays(self) -> dict[str, np.ndarray]:
-        """What ``fit`` learned that :func:`texsyn.save` stores besides the exemplar.
+        """What ``fit`` learned that :func:`texsyn.save` stores besides the exemplar (``docs/persistence.md``).
 
-        Empty by default: ``fit`` is a deterministic function of the exemplar and the
-        parameters (seeded, sums in a fixed order), so :func:`texsyn.load` fits the saved
-        exemplar again and gets the same model bit for bit. A method whose fit is expensive
-        returns its model's arrays (``sparse``: the dictionaries); ``docs/persistence.md``.
+        Empty by default: ``fit`` is deterministic, so :func:`texsyn.load` fits the saved exemplar
+        again, bit for bit. A method whose fit is expensive returns its model's arrays (``sparse``).
         """
         self._require_fitted()
         return {}
 
     def restore_fitted(self, exemplar: np.ndarray, arrays: dict[str, np.ndarray]) -> TextureSynthesizer:
-        """Make this unfitted instance the model saved with ``exemplar`` and ``arrays``.
+        """Make this unfitted instance the model saved with ``exemplar`` and ``arrays``; ``self``.
 
         The default fits ``exemplar`` again; a method that overrides :meth:`fitted_arrays`
-        rebuilds its model from ``arrays`` and overrides this too. Returns ``self``; raises
-        :class:`~texsyn.errors.InputError` for arrays that do not belong to the method.
+        rebuilds its model from ``arrays`` (:class:`~texsyn.errors.InputError` if they do not fit).
         """
-        if arrays:
-            raise InputError(
-                f"a saved model of method {self.name!r} holds no arrays besides the exemplar, "
-                f"got {', '.join(sorted(arrays))}"
-            )
+        self.check_fitted_names(list(arrays))
         return self.fit(exemplar)
+
+    def check_fitted_names(self, names: list[str]) -> None:
+        """Refuse array names :meth:`fitted_arrays` never writes (:attr:`fitted_names`), before they are read."""
+        unknown = sorted(n for n in names if self.fitted_names is None or not self.fitted_names.fullmatch(n))
+        if unknown:
+            listed = ", ".join(repr(n)[:60] for n in unknown[:3])
+            raise InputError(f"a saved model of method {self.name!r} holds no arrays named {listed}")
 
     # ------------------------------------------------------------------ fit / sample
     def min_exemplar_size(self) -> tuple[int, str]:

@@ -26,7 +26,7 @@ import numpy as np
 
 from .._validation import OneOf, Range
 from ..errors import InputError
-from ..models.sparse import SparseScale, learn_sparse_model, sparse_model_from_arrays
+from ..models.sparse import ARRAY_NAME, SparseScale, learn_sparse_model, sparse_model_from_arrays
 from ..ops.canvas import crop_to_output, padded_canvas
 from ..ops.graphcut import graphcut_reassemble
 from ..ops.histogram import HistogramMatcher
@@ -41,8 +41,7 @@ __all__ = ["ConstrainedSparse", "MODES", "image_energy", "image_update", "upsamp
 
 #: the step-by-step study of the paper's Fig. 4, each mode adding one ingredient
 MODES = ("basic", "frequency", "graphcut", "multiscale", "full")
-#: version of the in-memory state of :meth:`ConstrainedSparse.fitted_state` (texsyn 0.1's file format)
-FORMAT_VERSION = 1
+FORMAT_VERSION = 1  # of the deprecated in-memory state (fitted_state, texsyn 0.1)
 #: parameters that change what ``fit`` learns (a loaded dictionary cannot change them)
 LEARNED: tuple[str, ...] = (
     "patch_size",
@@ -137,6 +136,7 @@ class ConstrainedSparse(TextureSynthesizer):
     has_source_map = False
     deprecated_params = {"random_state": "fit_rng"}
     learned_params = LEARNED
+    fitted_names = ARRAY_NAME
 
     def __init__(
         self,
@@ -358,7 +358,7 @@ class ConstrainedSparse(TextureSynthesizer):
     def restore_fitted(self, exemplar: np.ndarray, arrays: dict[str, np.ndarray]) -> ConstrainedSparse:
         """Rebuild the saved model without running K-SVD again (``docs/persistence.md``)."""
         self._check_params()
-        model = sparse_model_from_arrays(arrays)
+        model = sparse_model_from_arrays(arrays, patch_size=self.patch_size)
         if self._scales > len(model.scales):
             raise InputError(
                 f"mode {self.mode!r} needs {self._scales} scales but the saved model has {len(model.scales)}; "

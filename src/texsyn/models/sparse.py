@@ -15,6 +15,7 @@ element-wise array comparison has no single truth value.
 
 from __future__ import annotations
 
+import re
 import time
 import warnings
 from dataclasses import dataclass, fields
@@ -216,8 +217,13 @@ def _entry(arrays: dict[str, np.ndarray], key: str, ndim: int) -> np.ndarray:
     return value
 
 
-def sparse_model_from_arrays(arrays: dict[str, np.ndarray]) -> SparseModel:
-    """The model written by :meth:`SparseModel.to_arrays`, checked.
+#: the arrays :meth:`SparseModel.to_arrays` writes, ``s<scale>_<field>`` and the scale count
+ARRAY_NAME = re.compile(r"n_scales_fitted|s(1[0-5]|[0-9])_(image|dictionary|usage|n_patches|sorted|mean|std)")
+
+
+def sparse_model_from_arrays(arrays: dict[str, np.ndarray], patch_size: int | None = None) -> SparseModel:
+    """The model written by :meth:`SparseModel.to_arrays`, checked (``patch_size``: the side of
+    the dictionary's atoms, when known).
 
     Raises
     ------
@@ -238,10 +244,17 @@ def sparse_model_from_arrays(arrays: dict[str, np.ndarray]) -> SparseModel:
         if (
             usage.shape[0] != dictionary.shape[1]
             or sorted_values.shape[0] != channels
+            or sorted_values.shape[1] < 1
             or mean.shape[0] != channels
             or std.shape[0] != channels
+            or (patch_size is not None and dictionary.shape[0] != patch_size * patch_size * channels)
         ):
             raise InputError(f"saved sparse model has inconsistent arrays at scale {j}")
+        values = (image, dictionary, usage, sorted_values, mean, std)
+        if not all(np.all(np.isfinite(np.asarray(v, dtype=np.float64))) for v in values):
+            raise InputError(f"saved sparse model holds NaN or infinite values at scale {j}")
+        if np.any(np.asarray(usage) < 0) or np.any(np.asarray(std) < 0):
+            raise InputError(f"saved sparse model holds negative usage counts or deviations at scale {j}")
         scales.append(
             SparseScale(
                 dictionary=dictionary,

@@ -85,8 +85,30 @@ _MOVED = {
 }
 
 
+#: modules of this package that moved (each now a deprecated alias that warns when imported)
+_MOVED_MODULES = (
+    "dtcwt",
+    "dtcwt_filters",
+    "gaussian",
+    "grouplets",
+    "patch_wavelet",
+    "portilla",
+    "pyramids",
+    "steerable",
+)
+
+
 def __getattr__(name: str):
     """Deprecated names: resolve those that moved to :mod:`texsyn.transforms`, with a warning."""
+    if name in _MOVED_MODULES:  # ``texsyn.ops.dtcwt`` without importing it, as round 1 allowed
+        with warnings.catch_warnings(record=True) as caught:  # re-issued at the caller's line
+            warnings.simplefilter("always", DeprecationWarning)
+            alias = importlib.import_module(f".{name}", __name__)
+        said = [str(w.message) for w in caught if issubclass(w.category, DeprecationWarning)]
+        warnings.warn(
+            said[0] if said else f"texsyn.ops.{name} is deprecated", DeprecationWarning, stacklevel=2
+        )
+        return alias
     module = _MOVED.get(name)
     if module is None:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
