@@ -271,41 +271,9 @@ def test_a_drawn_seed_is_printed_recorded_and_reproduces_the_texture(tmp_path, e
 
 def test_overwrite_replaces_the_output_and_its_sidecar(tmp_path, exemplar_file, capsys):
     out = tmp_path / "out.png"
-    assert (
-        run(
-            capsys,
-            "synth",
-            exemplar_file,
-            "-o",
-            out,
-            "--size",
-            "20x20",
-            "-m",
-            "random_phase",
-            "--seed",
-            "1",
-            "-q",
-        )[0]
-        == 0
-    )
-    assert (
-        run(
-            capsys,
-            "synth",
-            exemplar_file,
-            "-o",
-            out,
-            "--size",
-            "30x20",
-            "-m",
-            "random_phase",
-            "--seed",
-            "2",
-            "-q",
-            "--overwrite",
-        )[0]
-        == 0
-    )
+    common = ("synth", exemplar_file, "-o", out, "-m", "random_phase", "-q")
+    assert run(capsys, *common, "--size", "20x20", "--seed", "1")[0] == 0
+    assert run(capsys, *common, "--size", "30x20", "--seed", "2", "--overwrite")[0] == 0
     assert read_image(out).shape == (20, 30)
     assert json.loads((tmp_path / "out.png.json").read_text())["seed"] == 2
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ex.png", "out.png", "out.png.json"]

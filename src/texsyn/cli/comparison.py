@@ -13,7 +13,15 @@ from .._version import __version__
 from ..errors import InputError
 from ..methods import METHODS, get_method
 from .common import command_line, done, input_path, load_exemplar, output_set
-from .options import BUILTIN_PREFIX, SIZE, overwrite_option, param_option, parse_params, quiet_option
+from .options import (
+    BUILTIN_PREFIX,
+    SIZE,
+    output_option,
+    overwrite_option,
+    param_option,
+    parse_params,
+    quiet_option,
+)
 from .progress import ProgressBar
 
 __all__ = ["compare"]
@@ -21,13 +29,7 @@ __all__ = ["compare"]
 
 @click.command()
 @click.argument("exemplar", required=False)
-@click.option(
-    "-o",
-    "--output",
-    required=True,
-    type=click.Path(dir_okay=False),
-    help="Report file (.html); a .json sidecar with the same name is written beside it.",
-)
+@output_option("Report file (.html); a .json sidecar with the same name is written beside it.")
 @click.option(
     "-m", "--method", "methods", multiple=True, help="Method to compare (repeatable; all methods by default)."
 )

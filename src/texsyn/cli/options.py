@@ -123,6 +123,11 @@ def seed_option(what: str):
     )
 
 
+def output_option(help: str, *, folder: bool = False):
+    """``-o/--output``, required: a file (or, with ``folder``, a file or a folder)."""
+    return click.option("-o", "--output", required=True, type=click.Path(dir_okay=folder), help=help)
+
+
 def overwrite_option(help: str = OVERWRITE_HELP):
     """``--overwrite``: replace existing outputs (never an input)."""
     return click.option("--overwrite", is_flag=True, help=help)

@@ -38,6 +38,7 @@ from .options import (
     SIZE,
     Number,
     bit_depth_option,
+    output_option,
     overwrite_option,
     param_option,
     parse_params,
@@ -51,9 +52,7 @@ __all__ = ["animate", "modify", "synth"]
 
 @click.command()
 @click.argument("exemplar", required=False)
-@click.option(
-    "-o", "--output", required=True, type=click.Path(dir_okay=False), help="Output image (.png, .jpg, .tif)."
-)
+@output_option("Output image (.png, .jpg, .tif).")
 @click.option(
     "-m", "--method", default="quilting", show_default=True, help="Synthesis method (see `texsyn methods`)."
 )
@@ -168,9 +167,7 @@ def synth(
     show_default=True,
     help="Threshold as a fraction of the largest detail: 0 rebuilds INPUT, 1 is a pure synthesis.",
 )
-@click.option(
-    "-o", "--output", required=True, type=click.Path(dir_okay=False), help="Output image (.png, .jpg, .tif)."
-)
+@output_option("Output image (.png, .jpg, .tif).")
 @click.option(
     "--magnitudes",
     type=click.Path(dir_okay=False),
@@ -269,13 +266,7 @@ def modify(
 
 @click.command()
 @click.argument("exemplar", required=False)
-@click.option(
-    "-o",
-    "--output",
-    required=True,
-    type=click.Path(),
-    help="Video (.mp4, .gif) or a folder for PNG frames (new or empty).",
-)
+@output_option("Video (.mp4, .gif) or a folder for PNG frames (new or empty).", folder=True)
 @click.option(
     "--frames",
     type=click.IntRange(min=1, max=100000),

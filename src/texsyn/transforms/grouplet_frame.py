@@ -41,6 +41,8 @@ import math
 import numba
 import numpy as np
 
+from .grouplets import checked_associations
+
 __all__ = ["GroupletTightFrame", "grouplet_weights"]
 
 _SQRT2 = math.sqrt(2.0)
@@ -201,12 +203,7 @@ class GroupletTightFrame:
     """
 
     def __init__(self, associations: np.ndarray, shape: tuple[int, int]):
-        a = np.ascontiguousarray(associations, dtype=np.int64)
-        n = int(shape[0]) * int(shape[1])
-        if a.ndim != 2 or a.shape[1] != n:
-            raise ValueError(f"associations must have shape (L, {n}), got {a.shape}")
-        if a.size and (a.min() < 0 or a.max() >= n):
-            raise ValueError("associations point outside the image")
+        a = checked_associations(associations, shape)
         self.associations = a
         self.shape = (int(shape[0]), int(shape[1]))
         self.levels = a.shape[0]

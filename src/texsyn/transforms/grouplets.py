@@ -18,9 +18,26 @@ import numpy as np
 
 from .pyramids import LaplacianTightFrame
 
-__all__ = ["GroupletTransform", "WaveletGroupletTransform"]
+__all__ = ["GroupletTransform", "WaveletGroupletTransform", "checked_associations"]
 
 _SQRT2 = np.sqrt(2.0)
+
+
+def checked_associations(associations: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """Association fields ``(L, H*W)`` as contiguous int64 flat indexes, checked against ``shape``.
+
+    Raises
+    ------
+    ValueError
+        A wrong shape, or an index outside the image.
+    """
+    a = np.ascontiguousarray(associations, dtype=np.int64)
+    n = int(shape[0]) * int(shape[1])
+    if a.ndim != 2 or a.shape[1] != n:
+        raise ValueError(f"associations must have shape (L, {n}), got {a.shape}")
+    if a.size and (a.min() < 0 or a.max() >= n):
+        raise ValueError("associations point outside the image")
+    return a
 
 
 class GroupletTransform:
@@ -51,12 +68,8 @@ class GroupletTransform:
     """
 
     def __init__(self, associations: np.ndarray, shape: tuple[int, int]):
-        a = np.asarray(associations, dtype=np.int64)
-        n = int(shape[0]) * int(shape[1])
-        if a.ndim != 2 or a.shape[1] != n:
-            raise ValueError(f"associations must have shape (L, {n}), got {a.shape}")
-        if a.size and (a.min() < 0 or a.max() >= n):
-            raise ValueError("associations point outside the image")
+        a = checked_associations(associations, shape)
+        n = a.shape[1]
         self.associations = a
         self.shape = (int(shape[0]), int(shape[1]))
         self.levels = a.shape[0]
