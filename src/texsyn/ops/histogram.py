@@ -13,6 +13,7 @@ import numba
 import numpy as np
 
 from .color import ColorPCA
+from .linalg import parallel_map, worker_count
 
 __all__ = [
     "HistogramMatcher",
@@ -88,28 +89,69 @@ def match_sorted(
     return out.reshape(x.shape)
 
 
-def match_sorted_rows(values: np.ndarray, targets_sorted: np.ndarray) -> np.ndarray:
+def match_sorted_rows(
+    values: np.ndarray, targets_sorted: np.ndarray, *, rows: np.ndarray | None = None
+) -> np.ndarray:
     """:func:`match_sorted` for many rows at once: row ``i`` of ``values`` gets the values of
     row ``i`` of ``targets_sorted`` in the order of its ranks (ties broken by position).
 
+    The ranks come from NumPy's vectorised ``argsort`` (rows split over the worker threads),
+    whose order among equal values is then made canonical by position, so the result is
+    that of a stable sort on every machine and for any thread count.
+
     Parameters
     ----------
-    values, targets_sorted : ndarray, shape (B, N)
+    values : ndarray, shape (B, N)
+    targets_sorted : ndarray, shape (T, N)
+        ``T = B`` without ``rows``.
+    rows : ndarray of int, shape (B,), optional
+        Row ``i`` of ``values`` takes the targets of row ``rows[i]`` (no reordered copy of
+        the targets is made).
     """
     x = np.ascontiguousarray(values, dtype=np.float64)
     t = np.ascontiguousarray(targets_sorted, dtype=np.float64)
-    if x.ndim != 2 or x.shape != t.shape:
+    index = np.arange(x.shape[0]) if rows is None else np.asarray(rows, dtype=np.int64)
+    if x.ndim != 2 or t.ndim != 2 or x.shape[1] != t.shape[1] or index.shape != (x.shape[0],):
+        raise ValueError(
+            f"values {x.shape} and targets {t.shape} must be (B, N) and (T, N) arrays, one row each"
+        )
+    if rows is None and t.shape[0] != x.shape[0]:
         raise ValueError(f"values {x.shape} and targets {t.shape} must be equal (B, N) arrays")
-    return _match_rows(x, t)
+    if index.size and (index.min() < 0 or index.max() >= t.shape[0]):
+        raise ValueError(f"rows must index the {t.shape[0]} target rows")
+    return _scatter_by_rank(x, _argsort_rows(x), t, index)
+
+
+def _argsort_rows(x: np.ndarray) -> np.ndarray:
+    """``argsort`` of every row, the rows split over texsyn's worker threads (NumPy releases
+    the GIL while sorting). The order among equal values is arbitrary."""
+    workers = min(worker_count(), x.shape[0])
+    if workers <= 1 or x.size < 1 << 15:
+        return np.argsort(x, axis=-1)
+    chunks = np.array_split(np.arange(x.shape[0]), workers)
+    return np.concatenate(parallel_map(lambda rows: np.argsort(x[rows], axis=-1), chunks))
 
 
 @numba.njit(parallel=True, cache=True)
-def _match_rows(x, targets):
+def _scatter_by_rank(x, order, targets, rows):
+    """``out[i, order[i, k]] = targets[rows[i], k]`` after sorting each run of equal values by position."""
     out = np.empty_like(x)
     for i in numba.prange(x.shape[0]):
-        order = np.argsort(x[i], kind="mergesort")  # stable: ties keep their order
-        row = out[i]
-        row[order] = targets[i]
+        o = order[i]
+        row = x[i]
+        n = o.size
+        k = 0
+        while k < n:
+            end = k + 1
+            value = row[o[k]]
+            while end < n and row[o[end]] == value:
+                end += 1
+            if end - k > 1:
+                o[k:end] = np.sort(o[k:end])
+            k = end
+        target = targets[rows[i]]
+        for k in range(n):
+            out[i, o[k]] = target[k]
     return out
 
 

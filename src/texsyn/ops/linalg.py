@@ -34,7 +34,7 @@ from typing import TypeVar
 
 import numpy as np
 
-__all__ = ["fixed_order", "matmul", "worker_count", "BLOCK_ROWS", "BLOCK_COLUMNS"]
+__all__ = ["fixed_order", "matmul", "parallel_map", "worker_count", "BLOCK_ROWS", "BLOCK_COLUMNS"]
 
 #: rows of the left operand in one block of :func:`matmul` (part of the rounding contract:
 #: changing it may change results in the last bits)
@@ -136,6 +136,18 @@ def worker_count() -> int:
         return max(1, len(os.sched_getaffinity(0)))
     except (AttributeError, OSError):  # pragma: no cover - non-Linux
         return max(1, os.cpu_count() or 1)
+
+
+def parallel_map(function: Callable, items) -> list:
+    """``[function(item) for item in items]`` on texsyn's thread pool, results in item order.
+
+    For work that releases the GIL (NumPy sorts, FFTs, BLAS): each item is computed the same
+    way whichever thread runs it, so the results do not depend on the number of workers.
+    """
+    items = list(items)
+    if len(items) <= 1 or worker_count() == 1:
+        return [function(item) for item in items]
+    return list(_thread_pool().map(function, items))
 
 
 def _thread_pool() -> ThreadPoolExecutor:
