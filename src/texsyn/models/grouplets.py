@@ -109,12 +109,17 @@ class GroupletModel(metaclass=_LearnsFromExemplar):
     band_values : ndarray (J+1, L+1, C, H*W)
         Sorted wavelet-grouplet coefficients of the exemplar's periodic component.
     pixel_values : ndarray (C, H*W)
-        Sorted pixel values (principal-axis coordinates for colour).
+        Sorted pixel values of the exemplar's periodic component (principal-axis coordinates
+        for colour).
     levels, grouplet_levels : int
         ``J`` pyramid detail bands and ``L`` grouplet scales.
     space : ColourSpace
         The colour coordinates synthesised (:func:`texsyn.ops.color.colour_space`): the
         principal axes of a colour exemplar, or its luma.
+    frame : {'tight', 'haar'}
+        The grouplet frame of the wavelet-grouplet transform
+        (:class:`texsyn.transforms.grouplets.WaveletGroupletTransform`): section 2.2's tight
+        frame, or round 1's Haar construction.
     """
 
     flow: np.ndarray
@@ -124,6 +129,7 @@ class GroupletModel(metaclass=_LearnsFromExemplar):
     levels: int
     grouplet_levels: int
     space: ColourSpace = ColourSpace("grey", 1)
+    frame: str = "tight"
 
     @property
     def pca(self) -> ColorPCA | None:
@@ -151,6 +157,7 @@ class GroupletModel(metaclass=_LearnsFromExemplar):
         sigma: float = 5.0,
         presmooth: float = 1.0,
         colour: str = "pca",
+        frame: str = "tight",
     ) -> GroupletModel:
         """Learn both layers from an exemplar (section 3.1).
 
@@ -164,6 +171,8 @@ class GroupletModel(metaclass=_LearnsFromExemplar):
         colour : {'pca', 'grey'}
             Colour exemplars: synthesise the three principal colour axes with one shared
             geometry, or convert to grey (``docs/methods/grouplets.md``, "Deviations").
+        frame : {'tight', 'haar'}
+            The grouplet frame (section 2.2's tight frame, or round 1's Haar construction).
 
         Examples
         --------
@@ -176,26 +185,30 @@ class GroupletModel(metaclass=_LearnsFromExemplar):
         False
         """
         img = np.asarray(exemplar, dtype=np.float64)  # (H, W) or (H, W, 3)
-        # one periodic component (Moisan) serves the geometry and the statistics: the
-        # decomposition is linear and keeps the mean, so it commutes with luma and colour PCA
+        # one periodic component (Moisan) serves the geometry and all the statistics, pixels
+        # included: the output is periodic, and its pixel histogram then carries the energy
+        # its bands carry (the original pixels' would add the border jumps' energy, or remove
+        # it: +-10 % on every band of a 256x256 synthesis). The decomposition is linear and
+        # keeps the mean, so it commutes with luma and colour PCA.
         periodic_img = periodic_smooth_decomposition(img)[0]
         space = colour_space(colour, img)
-        coords, periodic = space.forward(img), space.forward(periodic_img)
+        periodic = space.forward(periodic_img)
         orientation, coherence = structure_tensor_orientation(
             luma(periodic_img), sigma=sigma, presmooth=presmooth
         )
         flow = orient_field(orientation)
-        transform = _wavelet_grouplets(flow, int(levels), int(grouplet_levels))
+        transform = _wavelet_grouplets(flow, int(levels), int(grouplet_levels), frame)
         coefficients = transform.forward(periodic)  # (J+1, L+1, C, H, W)
         b = coefficients.reshape(coefficients.shape[:3] + (-1,))
         return cls(
             flow=flow,
             coherence=coherence,
             band_values=np.sort(b, axis=-1),
-            pixel_values=np.sort(coords.reshape(-1, coords.shape[2]).T, axis=-1),
+            pixel_values=np.sort(periodic.reshape(-1, periodic.shape[2]).T, axis=-1),
             levels=int(levels),
             grouplet_levels=int(grouplet_levels),
             space=space,
+            frame=frame,
         )
 
     @property
@@ -208,9 +221,14 @@ class GroupletModel(metaclass=_LearnsFromExemplar):
         """Channels synthesised: 3 principal colour axes, or 1 grey channel."""
         return self.pixel_values.shape[0]
 
-    def transform(self, flow: np.ndarray) -> WaveletGroupletTransform:
-        """The wavelet-grouplet transform along ``flow`` (raw vectors, any size; section 2.3)."""
-        return _wavelet_grouplets(np.asarray(flow, dtype=np.float64), self.levels, self.grouplet_levels)
+    def transform(self, flow: np.ndarray, *, step: float = 0.25) -> WaveletGroupletTransform:
+        """The wavelet-grouplet transform along ``flow`` (raw vectors, any size; section 2.3).
+
+        ``step`` is the integration step of the association fields in pixels
+        (:func:`texsyn.ops.flow.association_fields`).
+        """
+        flow = np.asarray(flow, dtype=np.float64)
+        return _wavelet_grouplets(flow, self.levels, self.grouplet_levels, self.frame, step)
 
     def targets(self, n: int) -> HistogramTargets:
         """Sorted target values of every band and channel for ``n`` pixels (computed, not kept)."""
@@ -248,10 +266,18 @@ class GroupletModel(metaclass=_LearnsFromExemplar):
         """One pass of Table 1, steps 2-5: analyse, match the bands, synthesise, match the pixels.
 
         Step 6 of the paper goes back to step 3; the coefficients must be recomputed from the
-        new image, so a pass starts again from the analysis (step 2).
+        new image, so a pass starts again from the analysis (step 2). The bands are matched
+        in the transform's own layout (:meth:`WaveletGroupletTransform.analyse`), each to its
+        row of ``targets.bands``, without reordering copies.
         """
-        coefficients = self.match_bands(transform.forward(image), targets)
-        return self.match_pixels(transform.inverse(coefficients), targets)
+        coefficients = transform.analyse(image)  # (L+1, J+1, C, H, W)
+        levels, bands, channels = coefficients.shape[:3]
+        # row (l, j, c) of the layout is row (j, l, c) of the targets
+        order = np.arange(bands * levels * channels).reshape(bands, levels, channels)
+        rows = np.transpose(order, (1, 0, 2)).ravel()
+        n = coefficients.shape[-1] * coefficients.shape[-2]
+        matched = match_sorted_rows(coefficients.reshape(-1, n), targets.bands, rows=rows)
+        return self.match_pixels(transform.synthesise(matched.reshape(coefficients.shape)), targets)
 
     def to_image(self, channels: np.ndarray) -> np.ndarray:
         """``(H, W, C)`` model channels (principal-axis coordinates) to an ``(H, W[, 3])`` image."""
@@ -295,6 +321,9 @@ class GroupletModel(metaclass=_LearnsFromExemplar):
         )
 
 
-def _wavelet_grouplets(flow: np.ndarray, levels: int, grouplet_levels: int) -> WaveletGroupletTransform:
+def _wavelet_grouplets(
+    flow: np.ndarray, levels: int, grouplet_levels: int, frame: str, step: float = 0.25
+) -> WaveletGroupletTransform:
     """The wavelet-grouplet transform along a raw flow: association fields, then the frame."""
-    return WaveletGroupletTransform(association_fields(flow, grouplet_levels), flow.shape[:2], levels)
+    associations = association_fields(flow, grouplet_levels, step=step)
+    return WaveletGroupletTransform(associations, flow.shape[:2], levels, frame=frame, normalized=True)

@@ -41,11 +41,26 @@ import math
 import numba
 import numpy as np
 
-from .grouplets import checked_associations
-
-__all__ = ["GroupletTightFrame", "grouplet_weights"]
+__all__ = ["GroupletTightFrame", "checked_associations", "grouplet_weights"]
 
 _SQRT2 = math.sqrt(2.0)
+
+
+def checked_associations(associations: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """Association fields ``(L, H*W)`` as contiguous int64 flat indexes, checked against ``shape``.
+
+    Raises
+    ------
+    ValueError
+        A wrong shape, or an index outside the image.
+    """
+    a = np.ascontiguousarray(associations, dtype=np.int64)
+    n = int(shape[0]) * int(shape[1])
+    if a.ndim != 2 or a.shape[1] != n:
+        raise ValueError(f"associations must have shape (L, {n}), got {a.shape}")
+    if a.size and (a.min() < 0 or a.max() >= n):
+        raise ValueError("associations point outside the image")
+    return a
 
 
 def grouplet_weights(levels: int) -> np.ndarray:
@@ -106,6 +121,29 @@ def _masses(targets, orders):
 
 
 @numba.njit(cache=True)
+def _atom_factors(targets, orders, masses):
+    """The factor of every coefficient, ``sqrt(s_m S / (s_m + S)) / sqrt(2)`` or ``sqrt(s_L / 2)``.
+
+    It depends on the association fields only (not on the image): the mass ``S`` a group
+    has gathered when ``m`` merges into it is fixed by the processing order.
+    """
+    levels, n = targets.shape
+    out = np.empty((levels + 1, n))
+    for lv in range(levels):
+        acc = masses[lv].copy()
+        for k in range(n):
+            m = orders[lv, k]
+            p = targets[lv, m]
+            sm = masses[lv, m]
+            big_s = acc[p]
+            out[lv, m] = math.sqrt(sm * big_s / (sm + big_s)) / _SQRT2
+            acc[p] = big_s + sm
+    for m in range(n):
+        out[levels, m] = math.sqrt(masses[levels, m] / 2.0)
+    return out
+
+
+@numba.njit(cache=True)
 def _forward(image, targets, orders, masses):
     """Sequential in-place scan; returns the ``(L+1, N)`` coefficients and the number of updates."""
     levels, n = targets.shape
@@ -159,6 +197,28 @@ def _inverse(coefficients, targets, orders, masses):
     return r, count
 
 
+@numba.njit(parallel=True, cache=True)
+def _forward_rows(images, targets, orders, masses):
+    """:func:`_forward` of every row of ``images`` ``(B, N)``, rows in parallel: ``(L+1, B, N)``."""
+    levels = targets.shape[0]
+    out = np.empty((levels + 1, images.shape[0], images.shape[1]))
+    counts = np.zeros(images.shape[0], dtype=np.int64)
+    for i in numba.prange(images.shape[0]):
+        coefficients, counts[i] = _forward(images[i], targets, orders, masses)
+        out[:, i] = coefficients
+    return out, counts
+
+
+@numba.njit(parallel=True, cache=True)
+def _inverse_rows(coefficients, targets, orders, masses):
+    """:func:`_inverse` of every row of ``(L+1, B, N)`` coefficients, rows in parallel: ``(B, N)``."""
+    out = np.empty((coefficients.shape[1], coefficients.shape[2]))
+    counts = np.zeros(coefficients.shape[1], dtype=np.int64)
+    for i in numba.prange(coefficients.shape[1]):
+        out[i], counts[i] = _inverse(np.ascontiguousarray(coefficients[:, i]), targets, orders, masses)
+    return out, counts
+
+
 class GroupletTightFrame:
     """Grouplet tight frame ``B(Gamma)`` of Peyré 2008, section 2.2 (eq. 2 and the ``tau_l`` formula).
 
@@ -181,6 +241,12 @@ class GroupletTightFrame:
         The reconstruction weights ``tau_l`` (:func:`grouplet_weights`).
     masses : ndarray, shape (L+1, N)
         Support size ``s_l(m)`` behind each pixel's residual at the start of level ``l``.
+    scales : ndarray, shape (L+1, N)
+        Each coefficient's merge factor over the one it has on an unbranched flow line
+        (masses ``2^l``): 1 along a translation, other values where flow lines converge.
+        ``d_l(m) / scales[l, m]`` compares a difference (or an average) of residuals
+        wherever the flow converges; the grouplet model learns its marginals on them
+        (``docs/methods/grouplets.md``).
     orders : ndarray of int, shape (L, N)
         The processing order of each level, computed from ``A_l``.
     last_count : int
@@ -212,6 +278,9 @@ class GroupletTightFrame:
         for level in range(self.levels):
             self.orders[level] = _scan_order(a[level])
         self.masses = _masses(a, self.orders)
+        line = 2.0 ** (np.arange(self.levels + 1) / 2.0 - 1.0)  # 2^(l/2 - 1): masses 2^l on a line
+        line[self.levels] = 2.0 ** ((self.levels - 1) / 2.0)
+        self.scales = _atom_factors(a, self.orders, self.masses) / line[:, None]
         self.last_count = 0
 
     def forward(self, image: np.ndarray) -> np.ndarray:
@@ -220,12 +289,9 @@ class GroupletTightFrame:
         if x.shape[-2:] != self.shape:
             raise ValueError(f"image shape {x.shape[-2:]} does not match {self.shape}")
         batch = x.shape[:-2]
-        flat = x.reshape((-1, self.shape[0] * self.shape[1]))
-        out = np.empty((self.levels + 1, flat.shape[0], flat.shape[1]))
-        for i, row in enumerate(flat):
-            out[:, i], self.last_count = _forward(
-                np.ascontiguousarray(row), self.associations, self.orders, self.masses
-            )
+        flat = np.ascontiguousarray(x.reshape((-1, self.shape[0] * self.shape[1])))
+        out, counts = _forward_rows(flat, self.associations, self.orders, self.masses)
+        self.last_count = int(counts[0]) if counts.size else 0
         return out.reshape((self.levels + 1,) + batch + self.shape)
 
     def inverse(self, coefficients: np.ndarray) -> np.ndarray:
@@ -236,12 +302,9 @@ class GroupletTightFrame:
                 f"coefficients must have shape ({self.levels + 1}, ..., {self.shape}), got {c.shape}"
             )
         batch = c.shape[1:-2]
-        flat = c.reshape((self.levels + 1, -1, self.shape[0] * self.shape[1]))
-        out = np.empty(flat.shape[1:])
-        for i in range(flat.shape[1]):
-            out[i], self.last_count = _inverse(
-                np.ascontiguousarray(flat[:, i]), self.associations, self.orders, self.masses
-            )
+        flat = np.ascontiguousarray(c.reshape((self.levels + 1, -1, self.shape[0] * self.shape[1])))
+        out, counts = _inverse_rows(flat, self.associations, self.orders, self.masses)
+        self.last_count = int(counts[0]) if counts.size else 0
         return out.reshape(batch + self.shape)
 
     def energy(self, coefficients: np.ndarray) -> float:

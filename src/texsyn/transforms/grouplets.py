@@ -1,8 +1,10 @@
-"""Grouplet and wavelet-grouplet transforms along association fields (Peyré 2008, sections 2.2-2.3).
+"""Wavelet-grouplet transforms along association fields (Peyré 2008, sections 2.2-2.3).
 
-The paper defers the exact grouplet algorithm to Mallat's and its own preprints; this is our
-exactly invertible construction (``docs/methods/grouplets.md``, "The grouplet transform"):
-at level ``l`` every pixel ``m`` is paired with ``p = A_l(m)``,
+:class:`WaveletGroupletTransform` applies a grouplet frame to every band of a Laplacian tight
+frame (section 2.3). Its grouplet frame is the tight frame of section 2.2
+(:class:`texsyn.transforms.grouplet_frame.GroupletTightFrame`) or, with ``frame='haar'``,
+round 1's :class:`GroupletTransform`, an exactly invertible construction of ours
+(``docs/methods/grouplets.md``): at level ``l`` every pixel ``m`` is paired with ``p = A_l(m)``,
 
     d_l[m] = (a[m] - a[A_l m]) / sqrt(2),      a'[m] = (a[m] + a[A_l m]) / sqrt(2),
 
@@ -16,28 +18,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from .grouplet_frame import GroupletTightFrame, checked_associations
 from .pyramids import LaplacianTightFrame
 
-__all__ = ["GroupletTransform", "WaveletGroupletTransform", "checked_associations"]
+__all__ = ["FRAMES", "GroupletTransform", "WaveletGroupletTransform", "checked_associations"]
 
 _SQRT2 = np.sqrt(2.0)
-
-
-def checked_associations(associations: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    """Association fields ``(L, H*W)`` as contiguous int64 flat indexes, checked against ``shape``.
-
-    Raises
-    ------
-    ValueError
-        A wrong shape, or an index outside the image.
-    """
-    a = np.ascontiguousarray(associations, dtype=np.int64)
-    n = int(shape[0]) * int(shape[1])
-    if a.ndim != 2 or a.shape[1] != n:
-        raise ValueError(f"associations must have shape (L, {n}), got {a.shape}")
-    if a.size and (a.min() < 0 or a.max() >= n):
-        raise ValueError("associations point outside the image")
-    return a
 
 
 class GroupletTransform:
@@ -123,6 +109,14 @@ class WaveletGroupletTransform:
     shape : (int, int)
     levels : int
         Detail bands ``J`` of the pyramid.
+    frame : {'tight', 'haar'}
+        The grouplet frame: section 2.2's tight frame (:class:`GroupletTightFrame`), or round
+        1's undecimated Haar construction (:class:`GroupletTransform`).
+    normalized : bool
+        Tight frame only: divide every coefficient by its merge factor relative to an
+        unbranched flow line (:attr:`GroupletTightFrame.scales`; 1 along a translation), so
+        that coefficients compare across flows whose lines converge differently; the
+        inverse multiplies them back. What the grouplet model learns its marginals on.
 
     Examples
     --------
@@ -138,21 +132,69 @@ class WaveletGroupletTransform:
     True
     """
 
-    def __init__(self, associations: np.ndarray, shape: tuple[int, int], levels: int = 3):
+    def __init__(
+        self,
+        associations: np.ndarray,
+        shape: tuple[int, int],
+        levels: int = 3,
+        *,
+        frame: str = "tight",
+        normalized: bool = False,
+    ):
         self.pyramid = LaplacianTightFrame(shape, levels)
-        self.grouplets = GroupletTransform(associations, shape)
+        if frame not in FRAMES:
+            raise ValueError(f"frame must be one of {sorted(FRAMES)}, got {frame!r}")
+        self.grouplets = FRAMES[frame](associations, shape)
+        self.frame = frame
         self.shape = self.pyramid.shape
+        grouplets = self.grouplets
+        self.normalized = bool(normalized) and isinstance(grouplets, GroupletTightFrame)
+        if isinstance(grouplets, GroupletTightFrame) and self.normalized:
+            self._scales = grouplets.scales.reshape((-1,) + self.shape)
+
+    def analyse(self, image: np.ndarray) -> np.ndarray:
+        """Contiguous coefficients ``(L+1, J+1, C, H, W)`` of an image ``(H, W, C)`` (or ``(H, W)``, ``C = 1``).
+
+        The layout the grouplet frame computes in (grouplet scale first), with no copy; rows
+        of ``reshape(-1, H*W)`` are the bands ``(l, j, c)``. :meth:`forward` is the same
+        numbers in the order ``(J+1, L+1[, C], H, W)``.
+        """
+        x = np.asarray(image, dtype=np.float64)
+        planes = x[None] if x.ndim == 2 else np.moveaxis(x, -1, 0)  # (C, H, W)
+        bands = self.pyramid.forward_planes(planes)  # (J+1, C, H, W)
+        flat = bands.reshape((bands.shape[0] * bands.shape[1],) + self.shape)
+        coefficients = self.grouplets.forward(flat)
+        if self.normalized:
+            coefficients /= self._scales[:, None]
+        return coefficients.reshape((-1,) + bands.shape)
+
+    def synthesise(self, coefficients: np.ndarray) -> np.ndarray:
+        """Image ``(H, W, C)`` from coefficients in :meth:`analyse`'s layout (the pseudo-inverse)."""
+        c = np.asarray(coefficients, dtype=np.float64)
+        levels, bands, channels = c.shape[:3]
+        if self.normalized:
+            c = c * self._scales[:, None, None]
+        planes = self.grouplets.inverse(c.reshape((levels, bands * channels) + self.shape))
+        image = self.pyramid.inverse_planes(planes.reshape((bands, channels) + self.shape))
+        return np.moveaxis(image, 0, -1)
 
     def forward(self, image: np.ndarray) -> np.ndarray:
         """``(J+1, L+1, H, W)`` coefficients of a grey image, ``(J+1, L+1, C, H, W)`` of a colour one."""
-        bands = self.pyramid.forward(image)  # (J+1, H, W[, C])
-        if bands.ndim == 4:
-            bands = np.moveaxis(bands, -1, 1)  # (J+1, C, H, W)
-        return np.moveaxis(self.grouplets.forward(bands), 0, 1)
+        grey = np.ndim(image) == 2
+        coefficients = np.moveaxis(self.analyse(image), 0, 1)
+        return coefficients[:, :, 0] if grey else coefficients
 
     def inverse(self, coefficients: np.ndarray) -> np.ndarray:
-        """Image from coefficients (exact: the pyramid is tight, the grouplets invertible)."""
-        bands = self.grouplets.inverse(np.moveaxis(np.asarray(coefficients), 1, 0))
-        if bands.ndim == 4:
-            bands = np.moveaxis(bands, 1, -1)
-        return self.pyramid.inverse(bands)
+        """Image from coefficients (the pseudo-inverse; exact on the range of :meth:`forward`)."""
+        c = np.asarray(coefficients, dtype=np.float64)
+        grey = c.ndim == 4
+        layout = np.moveaxis(c[:, :, None] if grey else c, 1, 0)
+        image = self.synthesise(layout)
+        return image[..., 0] if grey else image
+
+
+#: the grouplet frames a :class:`WaveletGroupletTransform` can use
+FRAMES: dict[str, type[GroupletTightFrame] | type[GroupletTransform]] = {
+    "tight": GroupletTightFrame,
+    "haar": GroupletTransform,
+}

@@ -9,8 +9,10 @@ the undecimated Laplacian pyramid of Peyré's grouplets (2008, section 2.3). Lev
 from __future__ import annotations
 
 import numpy as np
+import scipy.fft as sfft
 from scipy import ndimage
 
+from ..ops.linalg import worker_count
 from .steerable import radial_lowpass
 
 __all__ = [
@@ -155,3 +157,25 @@ class LaplacianTightFrame:
         spectra = np.fft.rfft2(b, axes=(1, 2))
         filt = self.filters if b.ndim == 3 else self.filters[..., None]
         return np.fft.irfft2(np.sum(filt * spectra, axis=0), s=self.shape, axes=(0, 1))
+
+    def forward_planes(self, planes: np.ndarray) -> np.ndarray:
+        """Bands ``(J+1, B, H, W)`` of a stack of images ``(B, H, W)``, contiguous.
+
+        The same transform as :meth:`forward` with the images first, as the grouplet frame
+        reads them; the 2-D FFTs of the stack run on texsyn's worker threads (each one is
+        computed the same way on any thread, so the result does not depend on their number).
+        """
+        x = np.asarray(planes, dtype=np.float64)
+        if x.ndim != 3 or x.shape[1:] != self.shape:
+            raise ValueError(f"planes must have shape (B, {self.shape[0]}, {self.shape[1]}), got {x.shape}")
+        spectrum = sfft.rfft2(x, axes=(1, 2), workers=worker_count())
+        return sfft.irfft2(
+            self.filters[:, None] * spectrum[None], s=self.shape, axes=(2, 3), workers=worker_count()
+        )
+
+    def inverse_planes(self, bands: np.ndarray) -> np.ndarray:
+        """Images ``(B, H, W)`` from bands ``(J+1, B, H, W)`` (the adjoint of :meth:`forward_planes`)."""
+        b = np.asarray(bands, dtype=np.float64)
+        spectra = sfft.rfft2(b, axes=(2, 3), workers=worker_count())
+        total = np.sum(self.filters[:, None] * spectra, axis=0)
+        return sfft.irfft2(total, s=self.shape, axes=(1, 2), workers=worker_count())
