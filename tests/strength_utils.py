@@ -89,3 +89,18 @@ def exemplar_window_shares(image: np.ndarray, exemplar: np.ndarray, *, size: int
 
     field = nearest_patch_field(image, exemplar, patch_size=size)
     return float(np.mean(field.distance <= tolerance))
+
+
+def oriented_texture(size: int, angle_deg: float = 0.0, seed: int = 0) -> np.ndarray:
+    """Wood-grain-like stripes: white noise kept in a narrow band of frequencies around one direction."""
+    rng = np.random.default_rng(seed)
+    noise = rng.standard_normal((size, size))
+    kr = np.fft.fftfreq(size)[:, None]
+    kc = np.fft.fftfreq(size)[None, :]
+    a = np.radians(angle_deg)
+    along = kr * np.cos(a) + kc * np.sin(a)  # frequency component across the stripes
+    across = -kr * np.sin(a) + kc * np.cos(a)
+    mask = np.exp(-((np.abs(along) - 0.12) ** 2) / (2 * 0.03**2)) * np.exp(-(across**2) / (2 * 0.01**2))
+    img = np.real(np.fft.ifft2(np.fft.fft2(noise) * mask))
+    img = (img - img.min()) / (img.max() - img.min())
+    return img

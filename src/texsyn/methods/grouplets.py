@@ -4,9 +4,14 @@ The method class holds the parameters; what ``fit`` learns is a
 :class:`texsyn.models.grouplets.GroupletModel` (the geometric layer and the marginals of the
 wavelet-grouplet coefficients, section 3.1). Static synthesis (Table 1) runs the
 alternating-projections driver :func:`texsyn.drivers.alternating.alternate_projections` from
-white noise along the requested flow. Dynamic synthesis (Table 2) moves the flow with Stam's
-stable fluids (:mod:`texsyn.ops.fluid`), carries the texture with it, and pulls every frame
-back onto the grouplet model of the current flow with the same driver.
+white noise along the requested flow. Dynamic synthesis (Table 2) runs the fluid driver
+(:mod:`texsyn.drivers.fluid`): the flow evolves with Stam's stable fluids and a turbulent
+forcing, the texture is carried by it in renewed layers, and every frame is pulled back onto
+the grouplet model of the current flow with a few passes of Table 1.
+
+Why this module is long: one method class holds both of the paper's modes, static
+synthesis (Table 1) and fluid-driven animation (Table 2), because they share the fitted
+model, the projection and most parameters; the loops themselves live in the drivers.
 
 References
 ----------
@@ -17,7 +22,7 @@ Tables 1-2. The steps mapped to the code, the parameters and the deviations from
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Annotated
 
@@ -26,16 +31,26 @@ from scipy.ndimage import gaussian_filter
 
 from .._validation import OneOf, Range, check_output_shape, normalize_rng
 from ..drivers.alternating import alternate_projections
+from ..drivers.fluid import FlowDynamics, flow_sequence, looped_flow_sequence, texture_frames
 from ..errors import InputError
 from ..models.grouplets import GroupletModel, HistogramTargets
-from ..ops.flow import builtin_flow
-from ..ops.fluid import advect, diffuse, project, rescale_speed
+from ..ops.flow import builtin_flow, periodic_tiling
+from ..ops.fluid import project, rescale_speed, spectral_velocity, vortex_velocity
 from ..ops.linalg import fixed_order
 from ..ops.progress import Reporter
 from ._base import Progress, TextureSynthesizer
 from ._memory import output_bytes, pixel_count, shape_dims
 
 __all__ = ["Frame", "Grouplets", "GroupletModel"]
+
+#: how far (in e-folds of the eddies' strain, speed * 2 pi / flow_scale per frame) the flow
+#: may stretch a layer of texture before it has faded out, when ``renewal`` is automatic
+RENEWAL_STRAIN = 1.5
+
+#: integration step (pixels) of the association fields of the fluid's velocity fields: they
+#: are smooth (diffused and projected), so RK4 at 1 pixel follows them as closely as the
+#: static default of 0.25 (0.1 % of the associations differ at 256x256) four times faster
+FLUID_ASSOCIATION_STEP = 1.0
 
 
 @dataclass(frozen=True)
@@ -47,7 +62,8 @@ class Frame:
     index : int
     image : ndarray of float32, shape (H, W) or (H, W, 3), values in [0, 1]
     flow : ndarray of float64, shape (H, W, 2)
-        The divergence-free velocity ``V_i`` that shaped it (pixels per time unit).
+        The divergence-free velocity ``V_i`` that shaped it (pixels per time unit): the
+        texture moves by ``tau * flow`` to the next frame.
     """
 
     index: int
@@ -61,9 +77,9 @@ class Grouplets(TextureSynthesizer):
     Parameters
     ----------
     flow : str
-        Geometry of the output: 'learned' (the exemplar's direction field, tiled), 'vortex',
-        'constant:ANGLE' (degrees), 'sources' or 'waves'. Any ``(H, W, 2)`` array can be used
-        through :meth:`synthesize_along`.
+        Geometry of the output: 'learned' (the exemplar's direction field, repeated
+        periodically), 'vortex', 'constant:ANGLE' (degrees), 'sources' or 'waves'. Any
+        ``(H, W, 2)`` array can be used through :meth:`synthesize_along`.
     n_iterations : int
         Alternating projections of a static synthesis (Table 1).
     levels : int
@@ -76,20 +92,45 @@ class Grouplets(TextureSynthesizer):
         Gaussian pre-smoothing of the gradient in pixels.
     colour : str
         'pca': the three principal colour axes share one geometry; 'grey': grey output.
+    frame : str
+        The grouplet frame: 'tight' (section 2.2's tight frame) or 'haar' (round 1's
+        undecimated Haar construction).
     tau : float
-        Time step of the dynamic synthesis.
+        Time step between frames (Table 2).
     viscosity : float
         Fluid viscosity ``nu`` (pixels^2 per time unit, 5-point Laplacian).
     texture_viscosity : float
-        Diffusion of the advected texture (``nu~``; the paper's tour uses ``2 nu``).
+        Diffusion ``nu~`` of the advected texture before each projection.
     speed : float
-        Root-mean-square speed of the initial flow, pixels per time unit.
+        Root-mean-square motion of the texture in pixels per frame.
     initial_flow : str
-        'learned' (projected exemplar geometry) or 'noise' (projected smoothed white noise).
+        ``V_0``: 'learned' (the exemplar's geometry), 'turbulence' (random eddies of
+        ``flow_scale`` with the ``spectrum_slope`` energy spectrum), 'vortices' (Gaussian
+        vortices of radius ``flow_scale``) or 'noise' (smoothed white noise, round 1's).
+    turbulence : float
+        Random forcing that keeps the flow evolving: the fraction of the flow's speed it adds
+        per frame (0: the flow only evolves by itself, and slowly).
+    flow_scale : float
+        Wavelength in pixels of the eddies of the 'turbulence' and 'vortices' flows and of
+        the forcing; 0 picks half the smaller frame side.
+    spectrum_slope : float
+        Energy spectrum ``E(k) ~ k^-slope`` above the eddy scale (3: 2-D turbulence's
+        enstrophy cascade; 5/3: Kolmogorov's, with more small eddies).
     n_projections : int
-        Projection iterations onto the grouplet model per frame (Table 2, "a few").
+        Projection passes onto the grouplet model per frame (Table 2, "a few").
     keep_speed : bool
-        Rescale the flow to ``speed`` after every step (compensates viscous decay).
+        Hold the flow at ``speed`` at every step; otherwise viscosity slows it down.
+    advection : str
+        How the texture follows the flow: 'layers' (renewed layers: static syntheses carried
+        by the flow, each fading out after ``renewal`` frames while the next fades in, so
+        the flow never stretches the material far) or 'paper' (the paper's literal loop,
+        which advects the last frame forever: the material turns into long stripes).
+    renewal : int
+        Frames each layer lives; 0 picks the time the eddies take to stretch the material
+        by about ``RENEWAL_STRAIN`` (``RENEWAL_STRAIN * flow_scale / (2 pi speed)`` frames,
+        between 8 and 240).
+    layer_iterations : int
+        Table 1 passes of each new layer (frame 0's layers included).
 
     Examples
     --------
@@ -118,13 +159,20 @@ class Grouplets(TextureSynthesizer):
         sigma: Annotated[float, Range(0.5, 50.0)] = 5.0,
         presmooth: Annotated[float, Range(0.0, 10.0)] = 1.0,
         colour: Annotated[str, OneOf(("pca", "grey"))] = "pca",
+        frame: Annotated[str, OneOf(("tight", "haar"))] = "tight",
         tau: Annotated[float, Range(0.0, 10.0, low_open=True)] = 0.5,
         viscosity: Annotated[float, Range(0.0, 100.0)] = 0.025,
-        texture_viscosity: Annotated[float, Range(0.0, 100.0)] = 0.05,
+        texture_viscosity: Annotated[float, Range(0.0, 100.0)] = 0.0,
         speed: Annotated[float, Range(0.0, 100.0)] = 1.0,
-        initial_flow: Annotated[str, OneOf(("learned", "noise"))] = "learned",
+        initial_flow: Annotated[str, OneOf(("learned", "turbulence", "vortices", "noise"))] = "learned",
+        turbulence: Annotated[float, Range(0.0, 10.0)] = 0.1,
+        flow_scale: Annotated[float, Range(0.0, 4096.0)] = 0.0,
+        spectrum_slope: Annotated[float, Range(0.0, 10.0)] = 3.0,
         n_projections: Annotated[int, Range(0, 100)] = 2,
-        keep_speed: bool = False,
+        keep_speed: bool = True,
+        advection: Annotated[str, OneOf(("layers", "paper"))] = "layers",
+        renewal: Annotated[int, Range(0, 100000)] = 0,
+        layer_iterations: Annotated[int, Range(1, 500)] = 10,
     ):
         self.flow = flow
         self.n_iterations = n_iterations
@@ -133,13 +181,20 @@ class Grouplets(TextureSynthesizer):
         self.sigma = sigma
         self.presmooth = presmooth
         self.colour = colour
+        self.frame = frame
         self.tau = tau
         self.viscosity = viscosity
         self.texture_viscosity = texture_viscosity
         self.speed = speed
         self.initial_flow = initial_flow
+        self.turbulence = turbulence
+        self.flow_scale = flow_scale
+        self.spectrum_slope = spectrum_slope
         self.n_projections = n_projections
         self.keep_speed = keep_speed
+        self.advection = advection
+        self.renewal = renewal
+        self.layer_iterations = layer_iterations
 
     def min_exemplar_size(self) -> tuple[int, str]:
         return 8, "the structure tensor and the pyramid need at least 8x8 pixels"
@@ -173,13 +228,19 @@ class Grouplets(TextureSynthesizer):
         return terms
 
     def _animate_terms(self, exemplar_shape, shape, loop: int) -> dict[str, float]:
-        """:meth:`memory_terms` of a frame plus the fluid fields and the frames a loop keeps."""
+        """:meth:`memory_terms` of a frame, the fluid fields, two layers, and a loop's run-up.
+
+        A loop keeps the velocities of its ``loop`` closing frames and of the last half
+        layer life (``docs/methods/grouplets.md``, "Loops").
+        """
         _, _, c = shape_dims(exemplar_shape)
         terms = self.memory_terms(exemplar_shape, shape)
         pixels = pixel_count(shape)
-        terms["velocity, advection and diffusion"] = 160.0 * pixels + 24.0 * c * pixels
+        terms["velocity, forcing and advection"] = 160.0 * pixels + 24.0 * c * pixels
+        terms["two advected layers"] = 2.0 * pixels * (8.0 * c + 16.0 + 24.0)
         if loop:
-            terms["frames kept for the loop"] = loop * pixels * (4.0 * c + 16.0)
+            kept = loop + max(1, self.layer_life(shape) // 2)
+            terms["velocities kept for the loop"] = kept * pixels * 16.0
         return terms
 
     # ------------------------------------------------------------------ fit
@@ -193,16 +254,19 @@ class Grouplets(TextureSynthesizer):
             sigma=self.sigma,
             presmooth=self.presmooth,
             colour=self.colour,
+            frame=self.frame,
         )
 
     def flow_field(self, shape: tuple[int, int]) -> np.ndarray:
-        """The raw flow of the ``flow`` parameter at an output size (the learned one is tiled)."""
+        """The raw flow of the ``flow`` parameter at an output size.
+
+        The learned field is repeated periodically (:func:`texsyn.ops.flow.periodic_tiling`:
+        tiled at multiples of the exemplar's size, tiled and resampled otherwise), so the
+        periodic synthesis has no seam.
+        """
         model: GroupletModel = self.model_
         if self.flow == "learned":
-            h, w = shape
-            rows = np.arange(h) % model.shape[0]
-            cols = np.arange(w) % model.shape[1]
-            return model.flow[np.ix_(rows, cols)]
+            return periodic_tiling(model.flow, shape)
         return builtin_flow(self.flow, shape)
 
     # ------------------------------------------------------------------ static synthesis
@@ -214,10 +278,18 @@ class Grouplets(TextureSynthesizer):
         targets: HistogramTargets,
         reporter: Reporter | None = None,
         preview: Callable[[np.ndarray], np.ndarray] | None = None,
+        *,
+        fluid: bool = False,
     ) -> np.ndarray:
-        """``S(f; Gamma, D_0)``: Table 1 passes along ``flow``, through the alternating driver."""
+        """``S(f; Gamma, D_0)``: Table 1 passes along ``flow``, through the alternating driver.
+
+        ``fluid``: the flow is a fluid velocity (smooth), so its association fields are
+        integrated with the coarser :data:`FLUID_ASSOCIATION_STEP`.
+        """
         model: GroupletModel = self.model_
-        transform = model.transform(flow)
+        if n_iterations == 0:
+            return channels
+        transform = model.transform(flow, step=FLUID_ASSOCIATION_STEP if fluid else 0.25)
         return alternate_projections(
             channels,
             lambda f, _k: model.project_once(f, transform, targets),
@@ -266,19 +338,51 @@ class Grouplets(TextureSynthesizer):
         return model.to_image(channels)
 
     # ------------------------------------------------------------------ dynamic synthesis
+    def dynamics(self, shape: tuple[int, int]) -> FlowDynamics:
+        """How the flow of an animation with frames of ``shape`` evolves (the parameters)."""
+        return FlowDynamics(
+            tau=self.tau,
+            viscosity=self.viscosity,
+            speed=self.speed,
+            keep_speed=self.keep_speed,
+            turbulence=self.turbulence,
+            scale=self._flow_scale(shape),
+            slope=self.spectrum_slope,
+        )
+
+    def _flow_scale(self, shape: tuple[int, int]) -> float:
+        return float(self.flow_scale) if self.flow_scale > 0 else max(4.0, min(shape) / 2.0)
+
+    def layer_life(self, shape: tuple[int, int]) -> int:
+        """Frames each advected layer lives in an animation with frames of ``shape``.
+
+        ``renewal`` when set; otherwise the frames the eddies of ``flow_scale`` take to
+        stretch the material by :data:`RENEWAL_STRAIN` e-folds (their strain rate is about
+        ``2 pi speed / flow_scale`` per frame), between 8 and 240.
+        """
+        if self.renewal > 0:
+            return int(self.renewal)
+        strain = 2.0 * np.pi * max(self.speed, 1e-6) / self._flow_scale(shape)
+        return int(np.clip(round(RENEWAL_STRAIN / strain), 8, 240))
+
     def initial_velocity(self, shape: tuple[int, int], rng: np.random.Generator) -> np.ndarray:
-        """``V_0``: the projected learned flow, or projected smoothed noise, at RMS ``speed``.
+        """``V_0``: the ``initial_flow`` made divergence-free, moving ``speed`` pixels per frame.
 
         The paper leaves the initial flow open (``docs/methods/grouplets.md``, "Deviations").
         """
+        scale = self._flow_scale(shape)
         if self.initial_flow == "learned":
             raw = self.flow_field(shape)
+        elif self.initial_flow == "turbulence":
+            raw = spectral_velocity(shape, rng, scale=scale, slope=self.spectrum_slope)
+        elif self.initial_flow == "vortices":
+            raw = vortex_velocity(shape, rng, scale=scale)
         else:
             width = 0.3 * min(shape)
             raw = np.stack(
                 [gaussian_filter(rng.standard_normal(shape), width, mode="wrap") for _ in range(2)], axis=-1
             )
-        return rescale_speed(project(raw), self.speed)
+        return rescale_speed(project(raw), self.speed / self.tau)
 
     @fixed_order
     def animate(
@@ -290,12 +394,14 @@ class Grouplets(TextureSynthesizer):
         callback: Callable[[Progress], None] | None = None,
         loop: int = 0,
     ) -> Iterator[Frame]:
-        """Frames of a fluid-driven dynamic texture (paper Table 2 with Stam's stable fluids).
+        """Frames of a fluid-driven dynamic texture (paper Table 2).
 
-        Frame 0 is a static synthesis along ``V_0``; every next frame advects the flow and the
-        texture by the flow (semi-Lagrangian), diffuses both implicitly (``viscosity``,
-        ``texture_viscosity``), projects the flow to be divergence-free, and pulls the texture
-        back onto the grouplet model of the new flow with ``n_projections`` iterations.
+        The flow starts as ``initial_flow`` and evolves with Stam's stable fluids (advect,
+        diffuse, project onto divergence-free fields) and the ``turbulence`` forcing, at
+        ``speed`` pixels per frame. The texture moves with it: in renewed layers (static
+        syntheses carried by the flow, each living :meth:`layer_life` frames), or as the
+        paper's literal loop with ``advection='paper'``; every frame is projected onto the
+        grouplet model of the current flow with ``n_projections`` passes of Table 1.
 
         Parameters
         ----------
@@ -304,10 +410,10 @@ class Grouplets(TextureSynthesizer):
         shape : (int, int), optional
             Frame size; the exemplar's by default.
         loop : int
-            When positive, the sequence loops seamlessly: ``n_frames + loop`` frames are
-            simulated, the first ``loop`` ones are cross-faded into the last ``loop`` ones, and
-            the sequence starts at simulated frame ``loop`` (its last frame leads back to its
-            first). Not in the paper.
+            When positive, the sequence is periodic: the flow is steered back onto its own
+            start over the last ``loop`` frames and the texture layers are born at the same
+            phases in every period, so the frame after the last one is the first one. Needs
+            ``advection='layers'``.
 
         Yields
         ------
@@ -315,54 +421,59 @@ class Grouplets(TextureSynthesizer):
         """
         ex = self._require_fitted()
         shape = tuple(ex.shape[:2]) if shape is None else check_output_shape(shape)
-        overlap = int(loop) if loop else 0
+        closing = int(loop) if loop else 0
         self._check_memory(
             ex.shape,
             shape,
             task=f"animating {shape[1]}x{shape[0]} frames",
             advice="request smaller frames" + (" or a shorter loop" if loop else ""),
-            terms=self._animate_terms(ex.shape, shape, overlap),
+            terms=self._animate_terms(ex.shape, shape, closing),
         )
-        if overlap and not 0 < overlap < int(n_frames):
-            raise InputError(f"loop must be between 1 and n_frames - 1 = {int(n_frames) - 1}, got {overlap}")
         if int(n_frames) < 1:
             raise InputError(f"n_frames must be at least 1, got {n_frames}")
-        frames = self._simulate(int(n_frames) + overlap, shape, normalize_rng(rng), callback)
-        yield from _crossfade(frames, int(n_frames), overlap) if overlap else frames
+        if closing and not 0 < closing < int(n_frames):
+            raise InputError(f"loop must be between 1 and n_frames - 1 = {int(n_frames) - 1}, got {closing}")
+        if closing and self.advection == "paper":
+            raise InputError(
+                "loop needs advection='layers' (the paper's literal loop cannot close on itself)"
+            )
+        yield from self._simulate(int(n_frames), shape, normalize_rng(rng), callback, closing)
 
-    def _simulate(self, n_frames: int, shape, rng: np.random.Generator, callback) -> Iterator[Frame]:
-        """Table 2: frame 0 along ``V_0``, then advect, diffuse, project and re-project."""
+    def _simulate(
+        self, n_frames: int, shape, rng: np.random.Generator, callback, closing: int
+    ) -> Iterator[Frame]:
+        """Table 2 through the fluid driver, with this model's synthesis and projection."""
         model: GroupletModel = self.model_
-        reporter = Reporter(callback, "frames", n_frames)
         targets = model.targets(shape[0] * shape[1])
-        velocity = self.initial_velocity(shape, rng)
-        first = reporter.stage_of("first frame", self.n_iterations)
-        texture = self._project(model.noise(shape, rng), velocity, self.n_iterations, targets, first)
-        for index in range(n_frames):
-            if index > 0:
-                texture = advect(texture, velocity, self.tau)  # step 2, with the old velocity
-                moved = advect(velocity, velocity, self.tau)
-                texture = diffuse(texture, self.tau * self.texture_viscosity)  # step 3
-                velocity = project(diffuse(moved, self.tau * self.viscosity))  # step 4
-                if self.keep_speed:
-                    velocity = rescale_speed(velocity, self.speed)
-                texture = self._project(texture, velocity, self.n_projections, targets)
-            reporter(index + 1)
-            yield Frame(index, self._as_output(model.to_image(texture)), velocity.copy())
+        dynamics = self.dynamics(shape)
+        flow_seed = int(rng.integers(2**63))
+        initial = self.initial_velocity(shape, np.random.default_rng(flow_seed))
 
+        def velocities() -> Iterator[np.ndarray]:
+            flow_rng = np.random.default_rng([flow_seed, 1])
+            if closing:
+                return looped_flow_sequence(initial, n_frames, closing, dynamics, flow_rng)
+            return flow_sequence(initial, n_frames, dynamics, flow_rng)
 
-def _crossfade(frames: Iterable[Frame], n_frames: int, overlap: int) -> Iterator[Frame]:
-    """A looping sequence: drop the first ``overlap`` frames and fade the last ones into them."""
-    head = []
-    for frame in frames:
-        i = frame.index
-        if i < overlap:
-            head.append(frame)
-        elif i < n_frames:
-            yield Frame(i - overlap, frame.image, frame.flow)
-        else:
-            k = i - n_frames
-            w = (k + 1) / (overlap + 1)
-            image = (1 - w) * frame.image.astype(np.float64) + w * head[k].image
-            flow = (1 - w) * frame.flow + w * head[k].flow
-            yield Frame(i - overlap, image.astype(np.float32), flow)
+        def synthesize(velocity: np.ndarray) -> np.ndarray:
+            return self._project(
+                model.noise(shape, rng), velocity, self.layer_iterations, targets, fluid=True
+            )
+
+        def project_texture(texture: np.ndarray, velocity: np.ndarray) -> np.ndarray:
+            return self._project(texture, velocity, self.n_projections, targets, fluid=True)
+
+        frames = texture_frames(
+            velocities,
+            n_frames,
+            synthesize=synthesize,
+            project_texture=project_texture,
+            mean=model.pixel_values.mean(axis=1),
+            tau=self.tau,
+            renewal=0 if self.advection == "paper" else self.layer_life(shape),
+            texture_viscosity=self.texture_viscosity,
+            loop=bool(closing),
+            reporter=Reporter(callback, "frames", n_frames),
+        )
+        for index, (texture, velocity) in enumerate(frames):
+            yield Frame(index, self._as_output(model.to_image(texture)), velocity)

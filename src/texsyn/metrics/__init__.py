@@ -23,6 +23,8 @@ from .patches import (
 from .statistics import ps_distance, ps_statistics
 from .texture import (
     histogram_distance,
+    laplacian_band_energies,
+    mean_coherence,
     mean_gradient,
     radial_log_spectrum,
     sharpness_ratio,
@@ -38,6 +40,8 @@ __all__ = [
     "evaluate",
     "histogram_distance",
     "innovation",
+    "laplacian_band_energies",
+    "mean_coherence",
     "mean_gradient",
     "nearest_patch_field",
     "patch_coherence",

@@ -1,4 +1,5 @@
-"""Global texture distances: pixel histograms, power spectra, sharpness.
+"""Global texture distances and statistics: pixel histograms, power spectra, sharpness,
+band energies and orientation coherence.
 
 Every function takes the synthesised ``image`` first and the ``exemplar`` second, as
 float arrays in [0, 1] with the same number of channels; sizes may differ.
@@ -9,7 +10,9 @@ from __future__ import annotations
 import numpy as np
 
 from .._validation import as_exemplar
-from ..ops import as_channels, periodic_smooth_decomposition, transport_energy
+from ..ops import as_channels, luma, periodic_smooth_decomposition, transport_energy
+from ..ops.flow import structure_tensor_orientation
+from ..transforms.pyramids import LaplacianTightFrame
 
 __all__ = [
     "check_pair",
@@ -18,6 +21,8 @@ __all__ = [
     "spectrum_distance",
     "mean_gradient",
     "sharpness_ratio",
+    "laplacian_band_energies",
+    "mean_coherence",
 ]
 
 
@@ -118,3 +123,31 @@ def sharpness_ratio(image, exemplar) -> float:
     if reference == 0:
         raise ValueError("the exemplar is flat (zero gradient); the sharpness ratio is undefined")
     return mean_gradient(img) / reference
+
+
+def laplacian_band_energies(image, levels: int = 3) -> np.ndarray:
+    """Mean squared coefficient per pixel of every band of a Laplacian tight frame.
+
+    The frame is the undecimated one of the grouplet transform (Peyré 2008, section 2.3)
+    applied to the luma's periodic component, mean removed; bands are ``[finest, ...,
+    coarsest detail, low-pass]`` (``levels + 1`` values), so images of different sizes
+    compare. Blurring removes energy from the first values, noise adds it.
+    """
+    x = _grey(image)
+    x = periodic_smooth_decomposition(x)[0]
+    bands = LaplacianTightFrame(x.shape, int(levels)).forward(x - x.mean())
+    return np.mean(bands**2, axis=(1, 2))
+
+
+def mean_coherence(image, sigma: float = 5.0) -> float:
+    """Mean structure-tensor coherence of the luma, in [0, 1] (Peyré 2008, section 2.1).
+
+    About 0 for isotropic textures, near 1 where long parallel structures dominate.
+    """
+    return float(np.mean(structure_tensor_orientation(_grey(image), sigma=sigma)[1]))
+
+
+def _grey(image) -> np.ndarray:
+    """The luma of a colour image, a grey image as it is: ``(H, W)`` float64."""
+    x = as_channels(as_exemplar(image, name="image"))
+    return luma(x) if x.shape[2] == 3 else x[..., 0]

@@ -13,7 +13,7 @@ import math
 
 import numba
 import numpy as np
-from scipy.ndimage import gaussian_filter
+from scipy.ndimage import gaussian_filter, zoom
 
 from ..errors import InputError
 
@@ -21,6 +21,7 @@ __all__ = [
     "association_fields",
     "builtin_flow",
     "orient_field",
+    "periodic_tiling",
     "structure_tensor_orientation",
 ]
 
@@ -115,6 +116,37 @@ def orient_field(orientation: np.ndarray, start: tuple[int, int] | None = None) 
         np.ascontiguousarray(o[..., 0]), np.ascontiguousarray(o[..., 1]), int(r0), int(c0)
     )
     return np.stack([out_r, out_c], axis=-1)
+
+
+def periodic_tiling(flow: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """A periodic direction field's pattern repeated over a periodic canvas of another size.
+
+    When ``shape`` is a multiple of the field's size, the field is tiled. Otherwise it is
+    tiled the nearest whole number of times and resampled to ``shape`` (periodic bilinear
+    interpolation of the doubled-angle tensor ``(cos 2t, sin 2t)``, which has no sign
+    ambiguity), and the signs are chosen again by :func:`orient_field`; the result is
+    periodic at ``shape``, so a periodic synthesis has no seam at its border or inside.
+
+    Parameters
+    ----------
+    flow : ndarray, shape (h, w, 2)
+        Unit ``(row, col)`` directions, periodic.
+    shape : (int, int)
+    """
+    f = np.asarray(flow, dtype=np.float64)
+    h, w = f.shape[:2]
+    out_h, out_w = int(shape[0]), int(shape[1])
+    if out_h % h == 0 and out_w % w == 0:
+        return np.tile(f, (out_h // h, out_w // w, 1))
+    tiled = np.tile(f, (max(1, round(out_h / h)), max(1, round(out_w / w)), 1))
+    angle = np.arctan2(tiled[..., 1], tiled[..., 0])
+    factors = (out_h / tiled.shape[0], out_w / tiled.shape[1])
+    doubled = [
+        zoom(np.cos(2.0 * angle), factors, order=1, mode="grid-wrap", grid_mode=True),
+        zoom(np.sin(2.0 * angle), factors, order=1, mode="grid-wrap", grid_mode=True),
+    ]
+    theta = 0.5 * np.arctan2(doubled[1], doubled[0])
+    return orient_field(np.stack([np.cos(theta), np.sin(theta)], axis=-1))
 
 
 @numba.njit(cache=True)
