@@ -105,6 +105,20 @@ def _describe_os_error(exc: OSError) -> str:
     return str(exc) or type(exc).__name__
 
 
+def _signal_behind(exc: BaseException) -> BaseException:
+    """The signal's exception when ``exc`` is the ``SystemError`` it caused inside compiled code.
+
+    A signal handler that raises while a compiled (numba) function runs leaves the exception
+    set when the function returns, and the interpreter reports ``SystemError: ... returned a
+    result with an exception set`` with the signal's exception as its cause or context.
+    """
+    if isinstance(exc, SystemError):
+        behind = exc.__cause__ or exc.__context__
+        if isinstance(behind, (KeyboardInterrupt, Terminated)):
+            return behind
+    return exc
+
+
 def report_error(exc: BaseException, state: State) -> int:
     """One line on stderr for ``exc`` (the traceback first with --debug); the exit status."""
     if state.debug:
@@ -117,6 +131,7 @@ def report_error(exc: BaseException, state: State) -> int:
     if isinstance(exc, BrokenPipeError):  # nobody reads any more: nothing to say
         _silence_closed_streams()
         return EXIT_BROKEN_PIPE
+    exc = _signal_behind(exc)
     if isinstance(exc, Terminated):
         say("texsyn: terminated")
         return EXIT_TERMINATED

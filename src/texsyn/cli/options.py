@@ -14,6 +14,7 @@ import re
 
 import click
 
+from .._validation import OneOf
 from ..errors import InputError
 from ..methods import get_method
 
@@ -26,6 +27,8 @@ __all__ = [
     "Number",
     "Size",
     "bit_depth_option",
+    "method_option",
+    "option_params",
     "overwrite_option",
     "param_option",
     "parse_params",
@@ -175,3 +178,60 @@ def parse_params(method: str, items: tuple[str, ...]) -> dict:
         params[name] = spec.parse(value, method)
     # stacklevel=1: the warning names this module, which the command line shows (app.main)
     return cls.canonical_params(params, stacklevel=1)
+
+
+def method_option(method: str, name: str, help: str):
+    """``--NAME`` (dashes for underscores) for the parameter ``name`` of ``method``.
+
+    Its values and default are read from the signature (defaults in one place): a choice
+    for a parameter with a fixed set of values, a finite number otherwise; the value is
+    checked by :func:`option_params`. The option defaults to ``None``: not given, the
+    method's default applies.
+    """
+    spec = get_method(method).param_specs()[name]
+    if isinstance(spec.allowed, OneOf):
+        kind: click.ParamType = click.Choice([str(v) for v in spec.allowed.values])
+        allowed = ""
+    else:
+        kind, allowed = Number(), f", {spec.describe_allowed()}"
+    default = f"{spec.default:g}" if isinstance(spec.default, float) else spec.default
+    return click.option(
+        "--" + name.replace("_", "-"),
+        name,
+        type=kind,
+        help=f"{help} (parameter '{name}' of {method}{allowed}) [default: {default}]",
+    )
+
+
+def option_params(method: str, parameters: dict, options: dict) -> dict:
+    """Add the options that set a parameter of ``method`` (:func:`method_option`) to ``parameters``.
+
+    Parameters
+    ----------
+    method : str
+    parameters : dict
+        The ``-p NAME=VALUE`` parameters, by their current names (:func:`parse_params`).
+    options : dict
+        Parameter name -> option value (``None``: not given); the option is ``--NAME``
+        with dashes for underscores.
+
+    Returns
+    -------
+    dict
+        ``parameters`` with each given option's value, checked by the parameter's spec.
+
+    Raises
+    ------
+    click.UsageError
+        A parameter given both by its option and by ``-p``.
+    InputError
+        A value the parameter's spec refuses.
+    """
+    specs = get_method(method).param_specs()
+    for name, value in options.items():
+        if value is None:
+            continue
+        if name in parameters:
+            raise click.UsageError(f"give --{name.replace('_', '-')} or -p {name}=..., not both")
+        parameters[name] = specs[name].check(value, method)
+    return parameters

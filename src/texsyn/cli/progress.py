@@ -8,6 +8,7 @@ receives the :class:`~texsyn.ops.progress.Progress` records every method reports
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import Any
 
 from ..ops.progress import Progress
@@ -18,6 +19,11 @@ __all__ = ["ProgressBar"]
 class ProgressBar:
     """A rich progress bar on stderr that appears only once work has taken ``delay`` seconds.
 
+    It shows the label and stage, the bar, ``done/total``, the time elapsed since the bar
+    was made (the command's start) and the time remaining (ETA) of the current stage,
+    estimated by rich from the recent speed. A new stage (another ``stage`` name, e.g. from
+    fitting to frames) starts a new estimate, so units of different stages are never mixed.
+
     Parameters
     ----------
     label : str
@@ -26,24 +32,32 @@ class ProgressBar:
         ``False`` (``--quiet``) draws nothing.
     delay : float
         Seconds of work before the bar appears, so that quick commands print nothing.
+    clock : callable, optional
+        Seconds of a monotonic clock, for the delay, the elapsed time and the ETA
+        (``time.monotonic`` by default; tests pass a fake one).
     """
 
-    def __init__(self, label: str, enabled: bool, delay: float = 1.0):
+    def __init__(
+        self, label: str, enabled: bool, delay: float = 1.0, clock: Callable[[], float] = time.monotonic
+    ):
         self.label = label
         self.enabled = enabled
         self.delay = delay
-        self.start = time.monotonic()
+        self.clock = clock
+        self.start = clock()
         self._bar: Any = None  # a rich Progress, created when the bar first shows
         self._task: Any = None
+        self._stage: str | None = None
 
     def __call__(self, progress: Progress) -> None:
         if not self.enabled:
             return
+        description = f"{self.label} ({progress.stage})"
         if self._bar is None:
-            if time.monotonic() - self.start < self.delay:
+            if self.clock() - self.start < self.delay:
                 return
             from rich.console import Console
-            from rich.progress import BarColumn, TextColumn, TimeElapsedColumn
+            from rich.progress import BarColumn, TextColumn, TimeElapsedColumn, TimeRemainingColumn
             from rich.progress import Progress as RichProgress
 
             self._bar = RichProgress(
@@ -51,17 +65,28 @@ class ProgressBar:
                 BarColumn(),
                 TextColumn("{task.completed}/{task.total}"),
                 TimeElapsedColumn(),
+                TextColumn("ETA"),
+                TimeRemainingColumn(),
                 console=Console(stderr=True),
                 transient=False,
+                get_time=self.clock,
             )
             self._bar.start()
-            self._task = self._bar.add_task(self.label, total=progress.total)
-        self._bar.update(
-            self._task,
-            completed=progress.done,
-            total=progress.total,
-            description=f"{self.label} ({progress.stage})",
-        )
+            self._task = self._bar.add_task(description, total=progress.total, completed=progress.done)
+            self._stage = progress.stage
+            self._rich_task().start_time = self.start  # elapsed counts from the command's start
+        elif progress.stage != self._stage:
+            # a new stage counts other units: forget the old speed (the ETA), keep the elapsed time
+            self._bar.reset(
+                self._task, total=progress.total, completed=progress.done, description=description
+            )
+            self._rich_task().start_time = self.start
+            self._stage = progress.stage
+        self._bar.update(self._task, completed=progress.done, total=progress.total, description=description)
+
+    def _rich_task(self) -> Any:
+        """The rich task of the bar (a ``rich.progress.Task``)."""
+        return next(task for task in self._bar.tasks if task.id == self._task)
 
     def close(self) -> None:
         """Stop drawing (the bar stays on screen as it was last drawn)."""

@@ -15,6 +15,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..io import sidecar_path
+from ..io.output_paths import animation_format_error
 from ..io.writing import JSON_FORMATS, VIDEO_FORMATS
 from ..methods import METHODS, SynthesisResult, get_method, make_method
 from ..ops import position_colors
@@ -38,6 +39,8 @@ from .options import (
     SIZE,
     Number,
     bit_depth_option,
+    method_option,
+    option_params,
     output_option,
     overwrite_option,
     param_option,
@@ -264,9 +267,13 @@ def modify(
     done(quiet, None, False, f"wrote {out_path} ({w}x{h}, ratio {ratio:g}, exemplar {label}) and {side_path}")
 
 
+#: the options of ``animate`` that set a parameter of grouplets, each named after it
+ANIMATE_PARAMS = ("speed", "turbulence", "viscosity", "initial_flow")
+
+
 @click.command()
 @click.argument("exemplar", required=False)
-@output_option("Video (.mp4, .gif) or a folder for PNG frames (new or empty).", folder=True)
+@output_option(f"Video ({', '.join(VIDEO_FORMATS)}) or a folder for PNG frames (new or empty).", folder=True)
 @click.option(
     "--frames",
     type=click.IntRange(min=1, max=100000),
@@ -277,36 +284,62 @@ def modify(
 @click.option(
     "--fps", type=Number(0.1, 240.0), default=24.0, show_default=True, help="Frames per second of the video."
 )
-@click.option("--viscosity", type=Number(0.0), help="Fluid viscosity (parameter 'viscosity' of grouplets).")
+@method_option("grouplets", "speed", "Root-mean-square motion of the texture in pixels per frame")
+@method_option(
+    "grouplets",
+    "turbulence",
+    "Forcing that keeps the flow evolving: the fraction of its speed added per frame",
+)
+@method_option(
+    "grouplets", "viscosity", "Fluid viscosity in pixels^2 per time unit: higher damps the small eddies"
+)
+@method_option("grouplets", "initial_flow", "The flow at the first frame")
 @click.option("--size", type=SIZE, help="Frame size WIDTHxHEIGHT [default: the exemplar's].")
 @seed_option("animation")
 @click.option(
     "--loop",
+    metavar="N",
     type=click.IntRange(min=0, max=100000),
     default=0,
     show_default=True,
-    help="Cross-fade this many extra frames so the video loops seamlessly.",
+    help="Make the sequence loop seamlessly: the simulation steers the flow back to its start "
+    "over the last N frames (the last frame leads into the first). Smaller than --frames; "
+    "0: no loop.",
 )
 @param_option("Parameter of the grouplets method (repeatable).")
 @overwrite_option("Replace an existing video, or a folder holding only frame_NNNNN.png files.")
 @quiet_option
-def animate(exemplar, output, frames, fps, viscosity, size, seed, loop, params, overwrite, quiet):
+def animate(
+    exemplar,
+    output,
+    frames,
+    fps,
+    speed,
+    turbulence,
+    viscosity,
+    initial_flow,
+    size,
+    seed,
+    loop,
+    params,
+    overwrite,
+    quiet,
+):
     """Animate EXEMPLAR with fluid dynamics (Peyré 2008, grouplets): write a video or frames.
 
     EXEMPLAR is an image file or builtin:brick|grass|gravel (default: brick). An oriented
-    texture (wood, fibres, waves) works best. Also writes OUTPUT.json.
+    texture (wood, fibres, waves) works best. --speed, --turbulence, --viscosity and
+    --initial-flow set the grouplets parameters of those names (not also with -p). Also
+    writes OUTPUT.json.
     """
     out_name = Path(output)
     suffix = out_name.suffix.lower()
     if suffix and suffix not in VIDEO_FORMATS:
-        raise InputError(f"cannot write {suffix!r} animations; use .mp4, .gif or a folder name (PNG frames)")
+        raise animation_format_error(suffix)
     if loop and loop >= frames:
         raise click.UsageError(f"--loop must be smaller than --frames ({frames}), got {loop}")
-    parameters = parse_params("grouplets", params)
-    if viscosity is not None:
-        parameters["viscosity"] = (
-            get_method("grouplets").param_specs()["viscosity"].check(viscosity, "grouplets")
-        )
+    given = dict(zip(ANIMATE_PARAMS, (speed, turbulence, viscosity, initial_flow), strict=True))
+    parameters = option_params("grouplets", parse_params("grouplets", params), given)
     method = make_method("grouplets", **parameters)
     outputs = output_set(overwrite)
     outputs.add_input(input_path(exemplar), "exemplar")
@@ -324,14 +357,21 @@ def animate(exemplar, output, frames, fps, viscosity, size, seed, loop, params, 
     try:
         method.fit(image)
         h, w = shape if shape is not None else image.shape[:2]
+        used = method.get_params()
         sidecar = sidecar_json(
             "animate",
             outputs={"video" if suffix else "frames": out_path, "sidecar": side_path},
             inputs={"exemplar": exemplar or f"{BUILTIN_PREFIX}brick"},
             method="grouplets",
-            params=method.get_params(),
+            params=used,
             seed=seed,
-            options={"frames": frames, "fps": fps, "loop": loop, "size": [w, h]},
+            options={
+                "frames": frames,
+                "fps": fps,
+                "loop": loop,
+                "size": [w, h],
+                **{name: used[name] for name in ANIMATE_PARAMS},
+            },
         )
         with outputs:
             sequence = (f.image for f in method.animate(frames, shape, rng=seed, callback=bar, loop=loop))

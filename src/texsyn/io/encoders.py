@@ -3,7 +3,7 @@
 Each takes the temporary path an :class:`texsyn.io.OutputSet` gives it and writes one
 complete file there; the set renames it into place. Images are PNG, JPEG (quality 95) or
 TIFF, 8 or 16 bit (16-bit colour PNG through pypng, which Pillow cannot write); frames are
-a folder of PNGs or a looping GIF. MP4 is in :mod:`texsyn.io.video`.
+a folder of PNGs or a looping GIF. MP4 and WebM are in :mod:`texsyn.io.video`.
 """
 
 from __future__ import annotations

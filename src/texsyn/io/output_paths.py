@@ -31,6 +31,7 @@ __all__ = [
     "TEMP_SUFFIX",
     "VIDEO_FORMATS",
     "WRITE_FORMATS",
+    "animation_format_error",
     "backup_name",
     "check_existing",
     "check_folder",
@@ -50,7 +51,7 @@ __all__ = [
 WRITE_FORMATS = {".png": (8, 16), ".jpg": (8,), ".jpeg": (8,), ".tif": (8, 16), ".tiff": (8, 16)}
 ARRAY_FORMATS = {".npy": (8,)}
 JSON_FORMATS = {".json": (8,)}
-VIDEO_FORMATS = {".mp4": (8,), ".gif": (8,)}
+VIDEO_FORMATS = {".mp4": (8,), ".webm": (8,), ".gif": (8,)}
 FRAME_NAME = "frame_{:05d}.png"
 FRAME_RE = re.compile(r"frame_[0-9]{5,}\.png")
 TEMP_SUFFIX = ".part"
@@ -67,6 +68,17 @@ def sidecar_path(output: str | os.PathLike) -> Path:
 
 
 # ---------------------------------------------------------------------------- checks
+def animation_format_error(suffix: str) -> OutputPathError:
+    """The error for an animation named with a suffix that is not a video format.
+
+    >>> print(animation_format_error(".avi"))
+    cannot write '.avi' animations; use .mp4, .webm, .gif or a folder name (PNG frames)
+    """
+    return OutputPathError(
+        f"cannot write {suffix!r} animations; use {', '.join(VIDEO_FORMATS)} or a folder name (PNG frames)"
+    )
+
+
 def check_format(p: Path, formats: dict, bit_depth: int) -> None:
     suffix = p.suffix.lower()
     if suffix not in formats:

@@ -8,7 +8,7 @@ disk, an error, Ctrl-C, SIGTERM) leaves neither a partial file nor the first out
 command whose later outputs failed.
 
 Write: PNG, JPEG and TIFF (8 bit; 16 bit for PNG and TIFF on request), ``.npy`` arrays,
-UTF-8 text (JSON sidecars, HTML reports), MP4/GIF videos and folders of PNG frames.
+UTF-8 text (JSON sidecars, HTML reports), MP4, WebM and GIF videos and folders of PNG frames.
 
 The path checks and file-system steps are in :mod:`texsyn.io.output_paths`, the encoders
 in :mod:`texsyn.io.encoders` and :mod:`texsyn.io.video`; the encoders are called here
@@ -38,6 +38,7 @@ from .output_paths import (
     TEMP_SUFFIX,
     VIDEO_FORMATS,
     WRITE_FORMATS,
+    animation_format_error,
     atomic_write,
     backup_name,
     check_existing,
@@ -54,8 +55,8 @@ from .output_paths import (
     sidecar_path,
     write_error,
 )
+from .video import VIDEO_CODECS, encode_video
 from .video import FfmpegWriter as _FfmpegWriter  # noqa: F401 - a test makes ffmpeg fail through it
-from .video import encode_mp4
 from .video import ffmpeg_exe as _ffmpeg_exe
 
 __all__ = [
@@ -243,10 +244,10 @@ class OutputSet:
     def write_frames(
         self, path: str | os.PathLike, frames: Iterable[np.ndarray], *, fps: float = 24.0
     ) -> Path:
-        """Stage a video (``.mp4``, ``.gif``) or a claimed folder of PNG frames.
+        """Stage a video (``.mp4``, ``.webm``, ``.gif``) or a claimed folder of PNG frames.
 
-        ``frames`` is consumed one at a time; the video is checked after writing (``.mp4``:
-        ffmpeg's exit status and the frame count read back from the file).
+        ``frames`` is consumed one at a time; the video is checked after writing (``.mp4``
+        and ``.webm``: ffmpeg's exit status and the frame count read back from the file).
         """
         target = Path(path)
         if (
@@ -261,11 +262,12 @@ class OutputSet:
             return self.write(target, lambda tmp: encode_frame_folder(tmp, frames))
         if suffix == ".gif":
             return self.write(target, lambda tmp: encode_gif(tmp, frames, float(fps)))
-        if suffix == ".mp4":
+        if suffix in VIDEO_CODECS:
+            codec = VIDEO_CODECS[suffix]
             return self.write(
-                target, lambda tmp: encode_mp4(tmp, frames, float(fps), executable=_ffmpeg_exe())
+                target, lambda tmp: encode_video(tmp, frames, float(fps), codec, executable=_ffmpeg_exe())
             )
-        raise InputError(f"cannot write {suffix!r} animations; use .mp4, .gif or a folder name (PNG frames)")
+        raise animation_format_error(suffix)
 
     # -------------------------------------------------------------- commit / discard
     def commit(self) -> list[Path]:
@@ -372,10 +374,11 @@ def write_frames(
     Parameters
     ----------
     path : str or path-like
-        ``.mp4`` (H.264 through the ffmpeg of imageio-ffmpeg; odd sizes are padded by one
-        edge row/column; ffmpeg's exit status and the frame count are checked), ``.gif``
-        (looping), or a path without suffix: a folder that receives ``frame_00000.png``, ...
-        (a new or empty folder; with ``overwrite`` also a folder holding only such frames).
+        ``.mp4`` (H.264; odd sizes are padded by one edge row/column) or ``.webm`` (VP9),
+        both through the ffmpeg of imageio-ffmpeg, whose exit status and the frame count
+        read back are checked; ``.gif`` (looping); or a path without suffix: a folder that
+        receives ``frame_00000.png``, ... (a new or empty folder; with ``overwrite`` also a
+        folder holding only such frames).
     frames : iterable of ndarray, shape (H, W) or (H, W, 3)
         Consumed one at a time (a generator is fine); nothing is left behind on error.
     fps : float
