@@ -72,7 +72,8 @@ def test_laplacian_frame_is_tight_and_exact(shape):
         assert abs(np.sum(bands**2) / np.sum(image**2) - 1) < 1e-12
 
 
-def test_grouplets_reconstruct_exactly_with_converging_associations():
+@pytest.mark.filterwarnings("ignore:GroupletTransform:DeprecationWarning")
+def test_round1_grouplets_reconstruct_exactly_with_converging_associations():
     rng = np.random.default_rng(2)
     n = 24 * 20
     A = rng.integers(0, n, size=(4, n))  # random many-to-one maps
@@ -84,7 +85,8 @@ def test_grouplets_reconstruct_exactly_with_converging_associations():
     assert np.abs(transform.inverse(coefficients) - image).max() < 1e-10
 
 
-def test_grouplets_conserve_energy_for_bijective_associations():
+@pytest.mark.filterwarnings("ignore:GroupletTransform:DeprecationWarning")
+def test_round1_grouplets_conserve_energy_for_bijective_associations():
     rng = np.random.default_rng(3)
     n = 16 * 16
     A = np.stack([rng.permutation(n) for _ in range(3)])
@@ -96,6 +98,11 @@ def test_grouplets_conserve_energy_for_bijective_associations():
         assert abs(np.sum(one**2) / (2 * np.sum(residual**2)) - 1) < 1e-12
         residual = one[1].ravel()
     assert np.abs(transform.inverse(transform.forward(image)) - image).max() < 1e-12
+
+
+def test_round1_grouplet_transform_is_deprecated():
+    with pytest.warns(DeprecationWarning, match="GroupletTightFrame"):
+        GroupletTransform(np.arange(12)[None], (3, 4))
 
 
 def test_constant_image_has_zero_details():

@@ -254,7 +254,9 @@ def test_looped_animation_flows_are_the_simulation_shifted_then_steered_back_to_
     """loop=m: the flow of frame t is the plain simulation's flow of frame t + m (the loop
     starts after an m-frame run-up), until the last m frames, which blend it with the run-up
     (the simulation n frames earlier) with a weight that grows from 0 towards 1."""
-    method = texsyn.make_method("grouplets", colour="grey", n_iterations=2, layer_iterations=2).fit(grey_exemplar)
+    method = texsyn.make_method("grouplets", colour="grey", n_iterations=2, layer_iterations=2).fit(
+        grey_exemplar
+    )
     n, m, shape = 8, 3, (24, 16)
     simulated = list(method.animate(n + m, shape, rng=4))
     looped = list(method.animate(n, shape, rng=4, loop=m))

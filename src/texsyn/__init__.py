@@ -149,6 +149,7 @@ def animate(
     rng: None | int | np.random.Generator = None,
     *,
     callback=None,
+    loop: int = 0,
     **params,
 ):
     """Frames of a fluid-driven dynamic texture (Peyré 2008, grouplets), as a generator.
@@ -162,8 +163,12 @@ def animate(
     shape : (int, int), optional
         Frame size; the exemplar's by default.
     rng : None, int or numpy.random.Generator
+    loop : int
+        When positive, the sequence loops seamlessly: the simulation steers the flow back to
+        its start over the last ``loop`` frames (``Grouplets.animate``).
     **params
-        Hyperparameters of the ``grouplets`` method (``viscosity``, ``speed``, ``tau``...).
+        Hyperparameters of the ``grouplets`` method (``speed`` in pixels per frame,
+        ``turbulence``, ``viscosity``, ``initial_flow``...; ``docs/methods/grouplets.md``).
 
     Yields
     ------
@@ -177,4 +182,4 @@ def animate(
     (2, (32, 32), (32, 32, 2))
     """
     method = make_method("grouplets", **params).fit(exemplar)
-    yield from method.animate(n_frames, shape, rng=rng, callback=callback)
+    yield from method.animate(n_frames, shape, rng=rng, callback=callback, loop=loop)

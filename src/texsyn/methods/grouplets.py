@@ -92,9 +92,6 @@ class Grouplets(TextureSynthesizer):
         Gaussian pre-smoothing of the gradient in pixels.
     colour : str
         'pca': the three principal colour axes share one geometry; 'grey': grey output.
-    frame : str
-        The grouplet frame: 'tight' (section 2.2's tight frame) or 'haar' (round 1's
-        undecimated Haar construction).
     tau : float
         Time step between frames (Table 2).
     viscosity : float
@@ -159,7 +156,6 @@ class Grouplets(TextureSynthesizer):
         sigma: Annotated[float, Range(0.5, 50.0)] = 5.0,
         presmooth: Annotated[float, Range(0.0, 10.0)] = 1.0,
         colour: Annotated[str, OneOf(("pca", "grey"))] = "pca",
-        frame: Annotated[str, OneOf(("tight", "haar"))] = "tight",
         tau: Annotated[float, Range(0.0, 10.0, low_open=True)] = 0.5,
         viscosity: Annotated[float, Range(0.0, 100.0)] = 0.025,
         texture_viscosity: Annotated[float, Range(0.0, 100.0)] = 0.0,
@@ -181,7 +177,6 @@ class Grouplets(TextureSynthesizer):
         self.sigma = sigma
         self.presmooth = presmooth
         self.colour = colour
-        self.frame = frame
         self.tau = tau
         self.viscosity = viscosity
         self.texture_viscosity = texture_viscosity
@@ -254,7 +249,6 @@ class Grouplets(TextureSynthesizer):
             sigma=self.sigma,
             presmooth=self.presmooth,
             colour=self.colour,
-            frame=self.frame,
         )
 
     def flow_field(self, shape: tuple[int, int]) -> np.ndarray:

@@ -116,10 +116,6 @@ class GroupletModel(metaclass=_LearnsFromExemplar):
     space : ColourSpace
         The colour coordinates synthesised (:func:`texsyn.ops.color.colour_space`): the
         principal axes of a colour exemplar, or its luma.
-    frame : {'tight', 'haar'}
-        The grouplet frame of the wavelet-grouplet transform
-        (:class:`texsyn.transforms.grouplets.WaveletGroupletTransform`): section 2.2's tight
-        frame, or round 1's Haar construction.
     """
 
     flow: np.ndarray
@@ -129,7 +125,6 @@ class GroupletModel(metaclass=_LearnsFromExemplar):
     levels: int
     grouplet_levels: int
     space: ColourSpace = ColourSpace("grey", 1)
-    frame: str = "tight"
 
     @property
     def pca(self) -> ColorPCA | None:
@@ -157,7 +152,6 @@ class GroupletModel(metaclass=_LearnsFromExemplar):
         sigma: float = 5.0,
         presmooth: float = 1.0,
         colour: str = "pca",
-        frame: str = "tight",
     ) -> GroupletModel:
         """Learn both layers from an exemplar (section 3.1).
 
@@ -171,8 +165,6 @@ class GroupletModel(metaclass=_LearnsFromExemplar):
         colour : {'pca', 'grey'}
             Colour exemplars: synthesise the three principal colour axes with one shared
             geometry, or convert to grey (``docs/methods/grouplets.md``, "Deviations").
-        frame : {'tight', 'haar'}
-            The grouplet frame (section 2.2's tight frame, or round 1's Haar construction).
 
         Examples
         --------
@@ -197,7 +189,7 @@ class GroupletModel(metaclass=_LearnsFromExemplar):
             luma(periodic_img), sigma=sigma, presmooth=presmooth
         )
         flow = orient_field(orientation)
-        transform = _wavelet_grouplets(flow, int(levels), int(grouplet_levels), frame)
+        transform = _wavelet_grouplets(flow, int(levels), int(grouplet_levels))
         coefficients = transform.forward(periodic)  # (J+1, L+1, C, H, W)
         b = coefficients.reshape(coefficients.shape[:3] + (-1,))
         return cls(
@@ -208,7 +200,6 @@ class GroupletModel(metaclass=_LearnsFromExemplar):
             levels=int(levels),
             grouplet_levels=int(grouplet_levels),
             space=space,
-            frame=frame,
         )
 
     @property
@@ -228,7 +219,7 @@ class GroupletModel(metaclass=_LearnsFromExemplar):
         (:func:`texsyn.ops.flow.association_fields`).
         """
         flow = np.asarray(flow, dtype=np.float64)
-        return _wavelet_grouplets(flow, self.levels, self.grouplet_levels, self.frame, step)
+        return _wavelet_grouplets(flow, self.levels, self.grouplet_levels, step)
 
     def targets(self, n: int) -> HistogramTargets:
         """Sorted target values of every band and channel for ``n`` pixels (computed, not kept)."""
@@ -322,8 +313,9 @@ class GroupletModel(metaclass=_LearnsFromExemplar):
 
 
 def _wavelet_grouplets(
-    flow: np.ndarray, levels: int, grouplet_levels: int, frame: str, step: float = 0.25
+    flow: np.ndarray, levels: int, grouplet_levels: int, step: float = 0.25
 ) -> WaveletGroupletTransform:
-    """The wavelet-grouplet transform along a raw flow: association fields, then the frame."""
+    """The wavelet-grouplet transform along a raw flow: association fields, then the frame,
+    with normalised coefficients (``docs/methods/grouplets.md``, "Deviations")."""
     associations = association_fields(flow, grouplet_levels, step=step)
-    return WaveletGroupletTransform(associations, flow.shape[:2], levels, frame=frame, normalized=True)
+    return WaveletGroupletTransform(associations, flow.shape[:2], levels, normalized=True)
