@@ -38,6 +38,7 @@ from ..ops.flow import builtin_flow, periodic_tiling
 from ..ops.fluid import project, rescale_speed, spectral_velocity, vortex_velocity
 from ..ops.linalg import fixed_order
 from ..ops.progress import Reporter
+from ..transforms.grouplets import WaveletGroupletTransform
 from ._base import Progress, TextureSynthesizer
 from ._memory import output_bytes, pixel_count, shape_dims
 
@@ -267,23 +268,17 @@ class Grouplets(TextureSynthesizer):
     def _project(
         self,
         channels: np.ndarray,
-        flow: np.ndarray,
+        transform: WaveletGroupletTransform,
         n_iterations: int,
         targets: HistogramTargets,
         reporter: Reporter | None = None,
         preview: Callable[[np.ndarray], np.ndarray] | None = None,
-        *,
-        fluid: bool = False,
     ) -> np.ndarray:
-        """``S(f; Gamma, D_0)``: Table 1 passes along ``flow``, through the alternating driver.
-
-        ``fluid``: the flow is a fluid velocity (smooth), so its association fields are
-        integrated with the coarser :data:`FLUID_ASSOCIATION_STEP`.
-        """
+        """``S(f; Gamma, D_0)``: Table 1 passes with ``transform`` (along a flow ``Gamma``),
+        through the alternating driver."""
         model: GroupletModel = self.model_
         if n_iterations == 0:
             return channels
-        transform = model.transform(flow, step=FLUID_ASSOCIATION_STEP if fluid else 0.25)
         return alternate_projections(
             channels,
             lambda f, _k: model.project_once(f, transform, targets),
@@ -326,8 +321,9 @@ class Grouplets(TextureSynthesizer):
         h, w = flow.shape[:2]
         reporter = Reporter(callback, "iteration", self.n_iterations)
         noise = model.noise((h, w), rng)
+        transform = model.transform(flow)
         channels = self._project(
-            noise, flow, self.n_iterations, model.targets(h * w), reporter, model.to_image
+            noise, transform, self.n_iterations, model.targets(h * w), reporter, model.to_image
         )
         return model.to_image(channels)
 
@@ -449,13 +445,19 @@ class Grouplets(TextureSynthesizer):
                 return looped_flow_sequence(initial, n_frames, closing, dynamics, flow_rng)
             return flow_sequence(initial, n_frames, dynamics, flow_rng)
 
+        latest: list = [None, None]  # the last velocity and its transform (a birth frame uses it twice)
+
+        def transform_along(velocity: np.ndarray) -> WaveletGroupletTransform:
+            if latest[0] is not velocity:
+                latest[:] = [velocity, model.transform(velocity, step=FLUID_ASSOCIATION_STEP)]
+            return latest[1]
+
         def synthesize(velocity: np.ndarray) -> np.ndarray:
-            return self._project(
-                model.noise(shape, rng), velocity, self.layer_iterations, targets, fluid=True
-            )
+            noise = model.noise(shape, rng)
+            return self._project(noise, transform_along(velocity), self.layer_iterations, targets)
 
         def project_texture(texture: np.ndarray, velocity: np.ndarray) -> np.ndarray:
-            return self._project(texture, velocity, self.n_projections, targets, fluid=True)
+            return self._project(texture, transform_along(velocity), self.n_projections, targets)
 
         frames = texture_frames(
             velocities,

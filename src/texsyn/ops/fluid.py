@@ -14,6 +14,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.ndimage import map_coordinates, spline_filter
 
+from .linalg import parallel_map
+
 __all__ = [
     "advect",
     "advect_displacement",
@@ -47,15 +49,8 @@ def advect(field: np.ndarray, velocity: np.ndarray, tau: float = 1.0, *, order: 
     """
     g = np.asarray(field, dtype=np.float64)
     u = np.asarray(velocity, dtype=np.float64)
-    h, w = g.shape[:2]
-    r, c = np.meshgrid(np.arange(h, dtype=np.float64), np.arange(w, dtype=np.float64), indexing="ij")
-    coords = np.stack([r - tau * u[..., 0], c - tau * u[..., 1]])
-    if g.ndim == 2:
-        return map_coordinates(g, coords, order=order, mode="grid-wrap")
-    return np.stack(
-        [map_coordinates(g[..., k], coords, order=order, mode="grid-wrap") for k in range(g.shape[2])],
-        axis=-1,
-    )
+    coords = _grid(g.shape[:2]) - tau * np.moveaxis(u, -1, 0)
+    return _per_channel(lambda x: map_coordinates(x, coords, order=order, mode="grid-wrap"), g)
 
 
 def diffuse(field: np.ndarray, amount: float) -> np.ndarray:
@@ -167,6 +162,14 @@ def _grid(shape: tuple[int, int]) -> np.ndarray:
     )
 
 
+def _per_channel(function, image: np.ndarray) -> np.ndarray:
+    """``function`` of every channel of ``(H, W[, C])``, the channels on texsyn's worker threads
+    (SciPy's interpolation releases the GIL; each channel is computed alike on any thread)."""
+    if image.ndim == 2:
+        return function(image)
+    return np.stack(parallel_map(function, [image[..., k] for k in range(image.shape[2])]), axis=-1)
+
+
 def advect_displacement(displacement: np.ndarray, step: np.ndarray) -> np.ndarray:
     """Carry a coordinate map one step along the flow: ``D'(x) = D(x - U(x)) - U(x)``.
 
@@ -185,16 +188,14 @@ def advect_displacement(displacement: np.ndarray, step: np.ndarray) -> np.ndarra
     d = np.asarray(displacement, dtype=np.float64)
     u = np.asarray(step, dtype=np.float64)
     back = _grid(d.shape[:2]) - np.moveaxis(u, -1, 0)
-    moved = np.stack([map_coordinates(d[..., k], back, order=1, mode="grid-wrap") for k in range(2)], axis=-1)
-    return moved - u
+    return _per_channel(lambda x: map_coordinates(x, back, order=1, mode="grid-wrap"), d) - u
 
 
 def prefilter(image: np.ndarray) -> np.ndarray:
     """Periodic cubic B-spline coefficients of every channel of ``(H, W[, C])`` (for :func:`sample_displaced`)."""
-    x = np.asarray(image, dtype=np.float64)
-    if x.ndim == 2:
-        return spline_filter(x, order=3, mode="grid-wrap")
-    return np.stack([spline_filter(x[..., k], order=3, mode="grid-wrap") for k in range(x.shape[2])], axis=-1)
+    return _per_channel(
+        lambda x: spline_filter(x, order=3, mode="grid-wrap"), np.asarray(image, dtype=np.float64)
+    )
 
 
 def sample_displaced(coefficients: np.ndarray, displacement: np.ndarray) -> np.ndarray:
@@ -207,9 +208,4 @@ def sample_displaced(coefficients: np.ndarray, displacement: np.ndarray) -> np.n
     d = np.asarray(displacement, dtype=np.float64)
     points = _grid(d.shape[:2]) + np.moveaxis(d, -1, 0)
 
-    def one(channel: np.ndarray) -> np.ndarray:
-        return map_coordinates(channel, points, order=3, mode="grid-wrap", prefilter=False)
-
-    if c.ndim == 2:
-        return one(c)
-    return np.stack([one(c[..., k]) for k in range(c.shape[2])], axis=-1)
+    return _per_channel(lambda x: map_coordinates(x, points, order=3, mode="grid-wrap", prefilter=False), c)

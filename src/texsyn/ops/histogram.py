@@ -140,11 +140,13 @@ def _scatter_by_rank(x, order, targets, rows):
         o = order[i]
         row = x[i]
         n = o.size
+        ranked = np.empty(n)  # the row's values in rank order, read once
+        for k in range(n):
+            ranked[k] = row[o[k]]
         k = 0
         while k < n:
             end = k + 1
-            value = row[o[k]]
-            while end < n and row[o[end]] == value:
+            while end < n and ranked[end] == ranked[k]:
                 end += 1
             if end - k > 1:
                 o[k:end] = np.sort(o[k:end])

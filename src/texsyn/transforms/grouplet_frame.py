@@ -121,14 +121,19 @@ def _masses(targets, orders):
 
 
 @numba.njit(cache=True)
-def _atom_factors(targets, orders, masses):
-    """The factor of every coefficient, ``sqrt(s_m S / (s_m + S)) / sqrt(2)`` or ``sqrt(s_L / 2)``.
+def _schedule(targets, orders, masses):
+    """The merges of every level in processing order, with their image-independent factors.
 
-    It depends on the association fields only (not on the image): the mass ``S`` a group
-    has gathered when ``m`` merges into it is fixed by the processing order.
+    For the ``k``-th merge of level ``l`` (source ``m = orders[l, k]``, target ``p``, mass
+    ``s_m``, and ``S``, the mass the group of ``p`` has gathered so far): ``dst = p``, the
+    detail factor ``sqrt(s_m S / (s_m + S)) / sqrt(2)`` and the share ``s_m / (s_m + S)`` by
+    which the residual of ``p`` moves towards ``a(m)``. ``low`` is the low-pass factor
+    ``sqrt(s_L / 2)`` of each pixel.
     """
     levels, n = targets.shape
-    out = np.empty((levels + 1, n))
+    dst = np.empty((levels, n), dtype=np.int64)
+    detail = np.empty((levels, n))
+    share = np.empty((levels, n))
     for lv in range(levels):
         acc = masses[lv].copy()
         for k in range(n):
@@ -136,61 +141,59 @@ def _atom_factors(targets, orders, masses):
             p = targets[lv, m]
             sm = masses[lv, m]
             big_s = acc[p]
-            out[lv, m] = math.sqrt(sm * big_s / (sm + big_s)) / _SQRT2
+            dst[lv, k] = p
+            detail[lv, k] = math.sqrt(sm * big_s / (sm + big_s)) / _SQRT2
+            share[lv, k] = sm / (sm + big_s)
             acc[p] = big_s + sm
-    for m in range(n):
-        out[levels, m] = math.sqrt(masses[levels, m] / 2.0)
-    return out
+    low = np.sqrt(masses[levels] / 2.0)
+    return dst, detail, share, low
 
 
 @numba.njit(cache=True)
-def _forward(image, targets, orders, masses):
-    """Sequential in-place scan; returns the ``(L+1, N)`` coefficients and the number of updates."""
-    levels, n = targets.shape
+def _forward(image, src, dst, detail, share, low):
+    """Sequential in-place scan; returns the ``(L+1, N)`` coefficients and the number of updates.
+
+    Merge ``k`` of level ``l``: ``d_l(m) = detail (a(m) - r(p))``, ``r(p) += share (a(m) - r(p))``
+    (the mass-weighted average of the group and ``m``).
+    """
+    levels, n = src.shape
     out = np.empty((levels + 1, n))
     a = image.copy()
     count = 0
     for lv in range(levels):
         r = a.copy()  # the residual, updated in place
-        acc = masses[lv].copy()  # accumulated mass of each group
         for k in range(n):
-            m = orders[lv, k]
-            p = targets[lv, m]
-            sm = masses[lv, m]
-            big_s = acc[p]
-            out[lv, m] = math.sqrt(sm * big_s / (sm + big_s)) * (a[m] - r[p]) / _SQRT2
-            r[p] = (big_s * r[p] + sm * a[m]) / (big_s + sm)
-            acc[p] = big_s + sm
+            m = src[lv, k]
+            p = dst[lv, k]
+            diff = a[m] - r[p]
+            out[lv, m] = detail[lv, k] * diff
+            r[p] += share[lv, k] * diff
             count += 1
         a = r
     for m in range(n):
-        out[levels, m] = math.sqrt(masses[levels, m] / 2.0) * a[m]
+        out[levels, m] = low[m] * a[m]
         count += 1
     return out, count
 
 
 @numba.njit(cache=True)
-def _inverse(coefficients, targets, orders, masses):
+def _inverse(coefficients, src, dst, detail, share, low):
     """Undo the merges in reverse order; the mean of each pixel's two estimates is the adjoint."""
-    levels, n = targets.shape
+    levels, n = src.shape
     count = 0
     r = np.empty(n)
     for m in range(n):
-        r[m] = coefficients[levels, m] * _SQRT2 / math.sqrt(masses[levels, m])
+        r[m] = coefficients[levels, m] / low[m]
         count += 1
     for lv in range(levels - 1, -1, -1):
-        acc = masses[lv + 1].copy()
         source = np.empty(n)
         for k in range(n - 1, -1, -1):
-            m = orders[lv, k]
-            p = targets[lv, m]
-            sm = masses[lv, m]
-            before = acc[p] - sm
-            delta = coefficients[lv, m] * _SQRT2 / math.sqrt(sm * before / (sm + before))
-            old = r[p] - sm * delta / (before + sm)
+            m = src[lv, k]
+            p = dst[lv, k]
+            delta = coefficients[lv, m] / detail[lv, k]  # a(m) - r(p) before the merge
+            old = r[p] - share[lv, k] * delta
             source[m] = old + delta
             r[p] = old
-            acc[p] = before
             count += 1
         for m in range(n):
             r[m] = 0.5 * (r[m] + source[m])
@@ -198,24 +201,24 @@ def _inverse(coefficients, targets, orders, masses):
 
 
 @numba.njit(parallel=True, cache=True)
-def _forward_rows(images, targets, orders, masses):
+def _forward_rows(images, src, dst, detail, share, low):
     """:func:`_forward` of every row of ``images`` ``(B, N)``, rows in parallel: ``(L+1, B, N)``."""
-    levels = targets.shape[0]
+    levels = src.shape[0]
     out = np.empty((levels + 1, images.shape[0], images.shape[1]))
     counts = np.zeros(images.shape[0], dtype=np.int64)
     for i in numba.prange(images.shape[0]):
-        coefficients, counts[i] = _forward(images[i], targets, orders, masses)
+        coefficients, counts[i] = _forward(images[i], src, dst, detail, share, low)
         out[:, i] = coefficients
     return out, counts
 
 
 @numba.njit(parallel=True, cache=True)
-def _inverse_rows(coefficients, targets, orders, masses):
+def _inverse_rows(coefficients, src, dst, detail, share, low):
     """:func:`_inverse` of every row of ``(L+1, B, N)`` coefficients, rows in parallel: ``(B, N)``."""
     out = np.empty((coefficients.shape[1], coefficients.shape[2]))
     counts = np.zeros(coefficients.shape[1], dtype=np.int64)
     for i in numba.prange(coefficients.shape[1]):
-        out[i], counts[i] = _inverse(np.ascontiguousarray(coefficients[:, i]), targets, orders, masses)
+        out[i], counts[i] = _inverse(np.ascontiguousarray(coefficients[:, i]), src, dst, detail, share, low)
     return out, counts
 
 
@@ -278,9 +281,15 @@ class GroupletTightFrame:
         for level in range(self.levels):
             self.orders[level] = _scan_order(a[level])
         self.masses = _masses(a, self.orders)
+        self._merges = _schedule(a, self.orders, self.masses)
+        dst, detail, share, low = self._merges
+        factors = np.empty((self.levels + 1, a.shape[1]))
+        for level in range(self.levels):
+            factors[level, self.orders[level]] = detail[level]
+        factors[self.levels] = low
         line = 2.0 ** (np.arange(self.levels + 1) / 2.0 - 1.0)  # 2^(l/2 - 1): masses 2^l on a line
         line[self.levels] = 2.0 ** ((self.levels - 1) / 2.0)
-        self.scales = _atom_factors(a, self.orders, self.masses) / line[:, None]
+        self.scales = factors / line[:, None]
         self.last_count = 0
 
     def forward(self, image: np.ndarray) -> np.ndarray:
@@ -290,7 +299,7 @@ class GroupletTightFrame:
             raise ValueError(f"image shape {x.shape[-2:]} does not match {self.shape}")
         batch = x.shape[:-2]
         flat = np.ascontiguousarray(x.reshape((-1, self.shape[0] * self.shape[1])))
-        out, counts = _forward_rows(flat, self.associations, self.orders, self.masses)
+        out, counts = _forward_rows(flat, self.orders, *self._merges)
         self.last_count = int(counts[0]) if counts.size else 0
         return out.reshape((self.levels + 1,) + batch + self.shape)
 
@@ -303,7 +312,7 @@ class GroupletTightFrame:
             )
         batch = c.shape[1:-2]
         flat = np.ascontiguousarray(c.reshape((self.levels + 1, -1, self.shape[0] * self.shape[1])))
-        out, counts = _inverse_rows(flat, self.associations, self.orders, self.masses)
+        out, counts = _inverse_rows(flat, self.orders, *self._merges)
         self.last_count = int(counts[0]) if counts.size else 0
         return out.reshape(batch + self.shape)
 
