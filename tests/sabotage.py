@@ -12,7 +12,11 @@ variables set, it wraps the public outputs of the named method:
   a source map is permuted with them, so it still "explains" the output;
 - ``blur``: the output is blurred (Gaussian, sigma 1.5 pixels): fine detail is lost;
 - ``freeze`` (``animate`` only): every frame is a copy of the first;
-- ``independent`` (``animate`` only): every frame is an independent static synthesis.
+- ``independent`` (``animate`` only): every frame is an independent static synthesis (seeds
+  the tests do not use for their own references);
+- ``stripes`` (``animate`` only): the paper's literal loop (``advection='paper'``), which
+  keeps band energies but turns the material into smooth stripes; loops, which it cannot
+  make, are left alone.
 
 ``NAME`` is a method of the registry, ``modify`` (``PatchWavelet.modify``) or ``animate``
 (``Grouplets.animate``). The wrapped functions are the ones tests reach through the public
@@ -29,7 +33,7 @@ import os
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
-KINDS = ("shuffle", "blur", "freeze", "independent")
+KINDS = ("shuffle", "blur", "freeze", "independent", "stripes")
 
 
 def _shuffle(image: np.ndarray, source_map: np.ndarray | None, seed: int = 12345):
@@ -106,6 +110,16 @@ def install() -> str | None:
 
         @functools.wraps(animate)
         def broken_animate(self, n_frames=60, shape=None, *, rng=None, callback=None, loop=0):
+            if kind == "stripes":
+                if loop:
+                    yield from animate(self, n_frames, shape, rng=rng, callback=callback, loop=loop)
+                    return
+                kept, self.advection = self.advection, "paper"
+                try:
+                    yield from animate(self, n_frames, shape, rng=rng, callback=callback)
+                finally:
+                    self.advection = kept
+                return
             first = None
             for frame in animate(self, n_frames, shape, rng=rng, callback=callback, loop=loop):
                 if kind == "freeze":
@@ -114,7 +128,7 @@ def install() -> str | None:
                 elif kind == "independent":
                     size = frame.image.shape[:2]
                     image = self._as_output(
-                        self._along(frame.flow, np.random.default_rng(1000 + frame.index), None)
+                        self._along(frame.flow, np.random.default_rng(70000 + frame.index), None)
                     )
                     image = image if image.shape[:2] == size else image[: size[0], : size[1]]
                 else:

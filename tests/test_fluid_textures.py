@@ -20,6 +20,7 @@ import pytest
 
 import texsyn
 from texsyn.drivers.fluid import FlowDynamics, flow_sequence, looped_flow_sequence, texture_frames
+from texsyn.errors import InputError
 from texsyn.metrics import laplacian_band_energies
 from texsyn.ops.flow import periodic_tiling, structure_tensor_orientation
 from texsyn.ops.fluid import (
@@ -77,6 +78,11 @@ def unit(field: np.ndarray) -> np.ndarray:
     return field / np.maximum(np.linalg.norm(field, axis=-1, keepdims=True), 1e-12)
 
 
+def fine_coherence(image: np.ndarray) -> float:
+    """Mean coherence of the structure tensor at a fine scale (1.5 pixels): how stripy."""
+    return float(structure_tensor_orientation(image, sigma=1.5, presmooth=0.5)[1].mean())
+
+
 def detail_ratios(image: np.ndarray, reference: np.ndarray) -> np.ndarray:
     """Energy ratios of the Laplacian detail bands (finest first) of the method's own frame."""
     return (laplacian_band_energies(image, 3) / laplacian_band_energies(reference, 3))[:-1]
@@ -101,20 +107,76 @@ def test_frame_300_keeps_every_band_energy_of_frame_1_and_of_the_exemplar(video_
 
 
 @pytest.mark.method("animate")
+def test_the_material_does_not_turn_into_smooth_stripes():
+    """Band energies alone miss it: the paper's literal loop keeps them but draws stripes.
+
+    The fine-scale coherence (structure tensor at 1.5 pixels) of the grass crop is 0.50;
+    frames of the default video, every 10th of 300, seeds 0-2: 0.45 .. 0.52. The paper's
+    literal loop (advection='paper') reaches 0.66 .. 0.72 from frame 100 on (smooth, locally
+    straight stripes; ``tests/sabotage.py`` "stripes").
+    """
+    reference = fine_coherence(GRASS)
+    for frame in default_video(0)[::10]:
+        assert abs(fine_coherence(frame.image) - reference) <= 0.08, (
+            frame.index,
+            fine_coherence(frame.image),
+        )
+
+
+@pytest.mark.method("animate")
 def test_frames_follow_their_flow_and_keep_moving():
     run = video(0)
     m = video_method()
-    for t in (100, 200, N_FRAMES - 1):
-        image = run[t].image
-        warped = advect(run[t - 1].image, run[t - 1].flow, m.tau, order=3)
-        independent = m.synthesize_along(run[t].flow, rng=1000 + t)
-        # warped / independent difference, seeds 0-2: 0.12 .. 0.21; independent frames ~1
-        assert mad(image, warped) <= 0.3 * mad(image, independent)
-        # the warp explains the change: 0.6 .. 0.7 of the plain difference at half a pixel
+    # an independent synthesis along the same flow differs by `independent` on average
+    independent = np.mean(
+        [mad(run[t].image, m.synthesize_along(run[t].flow, rng=5000 + t)) for t in (100, 200, 299)]
+    )
+    for t in range(1, N_FRAMES):  # every step: a hard cut anywhere would stand out
+        image, before = run[t].image, run[t - 1].image
+        warped = advect(before, run[t - 1].flow, m.tau, order=3)
+        # warped / independent difference, seeds 0-2, all frames: 0.12 .. 0.23
+        assert mad(image, warped) <= 0.3 * independent, (t, mad(image, warped) / independent)
+        # the warp explains the change: 0.6 .. 0.82 of the plain difference at half a pixel
         # per frame (frozen frames do not change at all)
-        assert mad(image, warped) <= 0.85 * mad(image, run[t - 1].image)
+        assert mad(image, warped) <= 0.9 * mad(image, before), t
     displacement = np.mean([np.mean(np.linalg.norm(m.tau * f.flow, axis=-1)) for f in run])
     assert displacement > 0.4, displacement  # 0.46 .. 0.47 at 0.5 pixel per frame (RMS)
+    # the texture's orientation follows the current flow: mean |cos| between the frame's
+    # structure-tensor directions and the flow, every 10th frame, seeds 0-2: 0.73 .. 0.93
+    # (0.86 .. 0.88 on average); unrelated directions give 2 / pi = 0.64
+    cosines = [
+        np.mean(np.abs(np.sum(structure_tensor_orientation(f.image)[0] * unit(f.flow), axis=-1)))
+        for f in run[::10]
+    ]
+    assert np.mean(cosines) > 0.8 and min(cosines) > 0.68, cosines
+
+
+def test_a_frames_flow_is_its_own():
+    frames = method(n_iterations=2).animate(3, (32, 32), rng=0)
+    first = next(frames)
+    kept = first.flow.copy()
+    first.flow[...] = 0.0  # a caller may change what it was given
+    second = next(frames)
+    assert not np.shares_memory(first.flow, second.flow)
+    again = list(method(n_iterations=2).animate(3, (32, 32), rng=0))
+    np.testing.assert_array_equal(again[0].flow, kept)
+    np.testing.assert_array_equal(again[1].image, second.image)
+
+
+@pytest.mark.parametrize("renewal", [1, 2, 3])
+def test_layers_must_live_long_enough_to_move(renewal):
+    with pytest.raises(InputError, match="renewal must be 0"):
+        list(method(renewal=renewal, n_iterations=2).animate(3, (32, 32), rng=0))
+
+
+def test_an_odd_renewal_alternates_its_half_lives():
+    from texsyn.drivers.fluid import _births
+
+    births = _births(30, 5, loop=False)
+    assert births[:6] == [0, 2, 5, 7, 10, 12] and births[-1] >= 30
+    assert _births(30, 4, loop=False)[:4] == [0, 2, 4, 6]
+    looped = _births(30, 7, loop=True)
+    assert looped[0] == 0 and looped[-1] == 30 and len(looped) == 10
 
 
 def test_the_default_speed_moves_the_texture_over_half_a_pixel_per_frame():
@@ -145,9 +207,11 @@ def test_a_loop_keeps_the_statistics_and_wraps_like_any_other_step():
     wrap = mad(run[0].image, advect(run[-1].image, run[-1].flow, tau, order=3))
     # the wrap-around step against the others: 0.8 .. 1.2 of their median
     assert wrap <= 1.5 * np.median(steps), (wrap, np.median(steps))
-    for frame in run[::5]:  # no cross-fade: every frame, the closing ones too, keeps its bands
-        assert np.all(np.abs(detail_ratios(frame.image, GRASS) - 1) <= 0.12), detail_ratios(
-            frame.image, GRASS
+    for frame in run:  # no cross-fade: every frame, the closing ones too, keeps its bands
+        # largest deviation over the 60 frames: 0.10
+        assert np.all(np.abs(detail_ratios(frame.image, GRASS) - 1) <= 0.12), (
+            frame.index,
+            detail_ratios(frame.image, GRASS),
         )
 
 
@@ -179,13 +243,19 @@ def test_the_loop_driver_comes_back_exactly_to_its_first_frame():
     assert not np.array_equal(frames[15][0], frames[0][0])
 
 
-def test_the_looped_flow_returns_to_its_start_smoothly():
+@pytest.mark.parametrize("closing", [1, 2, 10])
+def test_the_looped_flow_returns_to_its_start_smoothly(closing):
     rng = np.random.default_rng(3)
     dynamics = FlowDynamics(speed=1.0, turbulence=0.2, scale=16.0)
-    flows = list(looped_flow_sequence(spectral_velocity((32, 32), rng, scale=16.0), 40, 10, dynamics, rng))
-    steps = [rms_speed(flows[t + 1] - flows[t]) for t in range(39)]
-    wrap = rms_speed(flows[0] - flows[-1])
-    assert wrap <= 1.5 * max(steps), (wrap, max(steps))
+    initial = spectral_velocity((32, 32), rng, scale=16.0)
+    flows = list(looped_flow_sequence(initial, 40, closing, dynamics, rng))
+    steps = [rms_speed(flows[t + 1] - flows[t]) for t in range(39)] + [rms_speed(flows[0] - flows[-1])]
+    free = max(steps[: 39 - closing])  # the simulated steps before the steering
+    # steering over c frames moves the blend weight by at most 1.5 / (c + 1) a step, between
+    # fields that differ by at most twice the RMS velocity: even a one-frame closing takes
+    # the jump in two halves
+    limit = max(1.5 * free, 2.0 * dynamics.velocity * 1.5 / (closing + 1))
+    assert max(steps[39 - closing :]) <= limit, (steps[39 - closing :], limit)
     for v in flows:
         assert np.abs(divergence(v)).max() < 1e-10
         assert rms_speed(v) == pytest.approx(dynamics.velocity, rel=0.05)
@@ -288,6 +358,13 @@ def test_the_learned_flow_repeats_without_a_seam_at_any_size():
         assert rows[-1].mean() <= 2.5 * rows[:-1].mean(axis=1).max() / 2 + rows.mean()
         assert cols[:, -1].mean() <= 2.5 * cols[:, :-1].mean(axis=0).max() / 2 + cols.mean()
     np.testing.assert_array_equal(periodic_tiling(model.flow, (96, 96)), np.tile(model.flow, (2, 2, 1)))
+
+
+def test_a_stretched_flow_stays_tangent_to_its_stretched_pattern():
+    diagonal = np.full((32, 32, 2), np.sqrt(0.5))  # lines at 45 degrees
+    field = periodic_tiling(diagonal, (48, 40))  # two tiles squeezed to 3/4, one stretched to 5/4
+    expected = unit(np.array([0.75, 1.25]))
+    np.testing.assert_allclose(np.abs(field), np.broadcast_to(expected, field.shape), atol=1e-12)
 
 
 def test_a_static_synthesis_has_no_seam_at_a_size_the_exemplar_does_not_divide():

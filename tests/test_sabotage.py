@@ -19,7 +19,7 @@ import texsyn
 CASES = (
     [(name, kind) for name in sorted(texsyn.METHODS) for kind in ("shuffle", "blur")]
     + [("modify", "shuffle"), ("modify", "blur")]
-    + [("animate", kind) for kind in ("shuffle", "blur", "freeze", "independent")]
+    + [("animate", kind) for kind in ("shuffle", "blur", "freeze", "independent", "stripes")]
 )
 
 

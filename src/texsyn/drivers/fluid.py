@@ -125,12 +125,16 @@ def looped_flow_sequence(
     """Velocities ``V_0 ... V_{n-1}`` of a flow that is periodic in time: ``V_n = V_0``.
 
     The flow is simulated from ``closing`` frames before frame 0 to frame ``n - 1``; over the
-    last ``closing`` frames it is steered (smoothstep weight, 0 to 1) onto the same
-    simulation ``n`` frames earlier, which is the run-up to ``V_0``, so ``V_n`` would be
-    ``V_0`` exactly and every step, the wrap-around included, is a simulated one. Both
-    fields are divergence-free, so their blend is; its RMS speed is interpolated too.
+    last ``closing`` frames it is steered onto the same simulation ``n`` frames earlier,
+    which is the run-up to ``V_0``, with a smoothstep weight at ``1/(c+1) ... c/(c+1)``
+    (``c = closing``) that reaches 1 at frame ``n``, where the field is ``V_0`` exactly.
+    Both fields are divergence-free, so their blend is; its RMS speed is interpolated too.
+    Every step, the wrap-around included, moves the weight by at most ``1.5 / (c+1)``: a
+    short closing turns the flow quickly near the end of the period.
     """
     n, c = int(n_frames), int(closing)
+    if not 0 < c < n:
+        raise ValueError(f"closing must be between 1 and n_frames - 1 = {n - 1}, got {c}")
     simulated = flow_sequence(initial, n + c, dynamics, rng)
     run_up = [next(simulated) for _ in range(c)]  # times -c .. -1
     for t, velocity in enumerate(simulated):
@@ -138,7 +142,7 @@ def looped_flow_sequence(
             yield velocity
             continue
         earlier = run_up[t - (n - c)]  # the simulation at time t - n
-        s = (t - (n - c)) / c
+        s = (t - (n - c) + 1) / (c + 1)
         w = s * s * (3.0 - 2.0 * s)
         speed = (1.0 - w) * rms_speed(velocity) + w * rms_speed(earlier)
         yield rescale_speed((1.0 - w) * velocity + w * earlier, speed)
@@ -159,14 +163,18 @@ class _Layer:
 
 
 def _births(n_frames: int, renewal: int, loop: bool) -> list[int]:
-    """Birth frames ``b_0 = 0 < b_1 < ...`` of the layers (one every ``renewal / 2`` frames).
+    """Birth frames ``b_0 = 0 < b_1 < ...`` of the layers, ``renewal / 2`` frames apart.
 
-    A loop has ``m >= 2`` births per period, evenly spread, and ``b_m = n_frames``.
+    An odd ``renewal`` alternates gaps of ``renewal // 2`` and ``renewal // 2 + 1`` frames,
+    so each layer lives ``renewal`` frames on average. A loop has ``m >= 2`` births per
+    period, evenly spread, and ``b_m = n_frames``.
     """
-    half = max(1, renewal // 2)
+    if renewal < 2:
+        raise ValueError(f"layers must live at least 2 frames, got renewal={renewal}")
     if not loop:
-        return list(range(0, int(n_frames) + half, half))
-    m = max(2, round(n_frames / half))
+        count = 2 * int(n_frames) // renewal + 2
+        return [(k * renewal) // 2 for k in range(count + 1)]
+    m = max(2, round(2 * n_frames / renewal))
     return [(k * int(n_frames)) // m for k in range(m + 1)]
 
 
@@ -210,7 +218,8 @@ def texture_frames(
     tau : float
         Time step: the texture moves by ``tau V_t`` from frame ``t`` to ``t + 1``.
     renewal : int
-        Frames a layer lives (fading in over the first half, out over the second); 0 for the
+        Frames a layer lives (fading in over the first half, out over the second; at least
+        2, and the method asks for 4 so that a layer moves before it fades); 0 for the
         paper's literal loop (advect the last projected frame).
     texture_viscosity : float
         ``nu~``: the advected texture is diffused by ``tau nu~`` before its projection.

@@ -48,6 +48,10 @@ __all__ = ["Frame", "Grouplets", "GroupletModel"]
 #: may stretch a layer of texture before it has faded out, when ``renewal`` is automatic
 RENEWAL_STRAIN = 1.5
 
+#: the shortest life of a layer: with fewer frames, a layer fades out before the flow has
+#: moved it, and every frame is a fresh synthesis
+MIN_RENEWAL = 4
+
 #: integration step (pixels) of the association fields of the fluid's velocity fields: they
 #: are smooth (diffused and projected), so RK4 at 1 pixel follows them as closely as the
 #: static default of 0.25 (0.1 % of the associations differ at 256x256) four times faster
@@ -104,7 +108,8 @@ class Grouplets(TextureSynthesizer):
     initial_flow : str
         ``V_0``: 'learned' (the exemplar's geometry), 'turbulence' (random eddies of
         ``flow_scale`` with the ``spectrum_slope`` energy spectrum), 'vortices' (Gaussian
-        vortices of radius ``flow_scale``) or 'noise' (smoothed white noise, round 1's).
+        vortices ``flow_scale`` across: radius ``sigma = flow_scale / 4``) or 'noise'
+        (smoothed white noise, round 1's).
     turbulence : float
         Random forcing that keeps the flow evolving: the fraction of the flow's speed it adds
         per frame (0: the flow only evolves by itself, and slowly).
@@ -124,7 +129,7 @@ class Grouplets(TextureSynthesizer):
         the flow never stretches the material far) or 'paper' (the paper's literal loop,
         which advects the last frame forever: the material turns into long stripes).
     renewal : int
-        Frames each layer lives; 0 picks the time the eddies take to stretch the material
+        Frames each layer lives (0, or at least :data:`MIN_RENEWAL`); 0 picks the time the eddies take to stretch the material
         by about ``RENEWAL_STRAIN`` (``RENEWAL_STRAIN * flow_scale / (2 pi speed)`` frames,
         between 8 and 240).
     layer_iterations : int
@@ -256,8 +261,9 @@ class Grouplets(TextureSynthesizer):
         """The raw flow of the ``flow`` parameter at an output size.
 
         The learned field is repeated periodically (:func:`texsyn.ops.flow.periodic_tiling`:
-        tiled at multiples of the exemplar's size, tiled and resampled otherwise), so the
-        periodic synthesis has no seam.
+        tiled at multiples of the exemplar's size; otherwise tiled the nearest whole number
+        of times and stretched to fit, by 3/4 to 3/2 per axis, or shrunk when the output is
+        smaller than the exemplar), so the periodic synthesis has no seam.
         """
         model: GroupletModel = self.model_
         if self.flow == "learned":
@@ -366,7 +372,7 @@ class Grouplets(TextureSynthesizer):
         elif self.initial_flow == "turbulence":
             raw = spectral_velocity(shape, rng, scale=scale, slope=self.spectrum_slope)
         elif self.initial_flow == "vortices":
-            raw = vortex_velocity(shape, rng, scale=scale)
+            raw = vortex_velocity(shape, rng, scale=scale / 4.0)  # a vortex spans +-2 sigma
         else:
             width = 0.3 * min(shape)
             raw = np.stack(
@@ -423,6 +429,11 @@ class Grouplets(TextureSynthesizer):
             raise InputError(f"n_frames must be at least 1, got {n_frames}")
         if closing and not 0 < closing < int(n_frames):
             raise InputError(f"loop must be between 1 and n_frames - 1 = {int(n_frames) - 1}, got {closing}")
+        if 0 < self.renewal < MIN_RENEWAL:
+            raise InputError(
+                f"renewal must be 0 (automatic) or at least {MIN_RENEWAL} frames, got {self.renewal}"
+                " (shorter-lived layers make every frame a new synthesis)"
+            )
         if closing and self.advection == "paper":
             raise InputError(
                 "loop needs advection='layers' (the paper's literal loop cannot close on itself)"
@@ -472,4 +483,5 @@ class Grouplets(TextureSynthesizer):
             reporter=Reporter(callback, "frames", n_frames),
         )
         for index, (texture, velocity) in enumerate(frames):
-            yield Frame(index, self._as_output(model.to_image(texture)), velocity)
+            # a copy: the driver keeps the velocity it yields to make the next one
+            yield Frame(index, self._as_output(model.to_image(texture)), velocity.copy())

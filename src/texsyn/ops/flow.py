@@ -121,11 +121,15 @@ def orient_field(orientation: np.ndarray, start: tuple[int, int] | None = None) 
 def periodic_tiling(flow: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     """A periodic direction field's pattern repeated over a periodic canvas of another size.
 
-    When ``shape`` is a multiple of the field's size, the field is tiled. Otherwise it is
-    tiled the nearest whole number of times and resampled to ``shape`` (periodic bilinear
-    interpolation of the doubled-angle tensor ``(cos 2t, sin 2t)``, which has no sign
-    ambiguity), and the signs are chosen again by :func:`orient_field`; the result is
-    periodic at ``shape``, so a periodic synthesis has no seam at its border or inside.
+    When ``shape`` is a multiple of the field's size, the field is tiled exactly. Otherwise
+    it is tiled the nearest whole number of times (at least once) and the tiling is
+    stretched to ``shape``: a scale factor ``s`` per axis, between 3/4 and 3/2 when
+    ``shape`` is at least the field's size, and smaller when the canvas is smaller than one
+    tile (its pattern is shrunk to fit). The doubled-angle tensor ``(cos 2t, sin 2t)`` is
+    interpolated (periodic bilinear, no sign ambiguity), each direction is mapped by the
+    stretch (``(s_r d_r, s_c d_c)``, renormalised) so the field stays tangent to the
+    stretched pattern, and the signs are chosen again by :func:`orient_field`. The result
+    is periodic at ``shape``, so a periodic synthesis has no seam at its border or inside.
 
     Parameters
     ----------
@@ -146,7 +150,8 @@ def periodic_tiling(flow: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
         zoom(np.sin(2.0 * angle), factors, order=1, mode="grid-wrap", grid_mode=True),
     ]
     theta = 0.5 * np.arctan2(doubled[1], doubled[0])
-    return orient_field(np.stack([np.cos(theta), np.sin(theta)], axis=-1))
+    stretched = np.stack([factors[0] * np.cos(theta), factors[1] * np.sin(theta)], axis=-1)
+    return orient_field(stretched / np.linalg.norm(stretched, axis=-1, keepdims=True))
 
 
 @numba.njit(cache=True)
