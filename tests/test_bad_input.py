@@ -537,3 +537,22 @@ def test_an_empty_file_name_is_a_missing_file_not_the_current_folder(tmp_path, c
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and "no such file" in err[0], err
     assert not any(tmp_path.iterdir())
+
+
+def test_an_error_a_signal_caused_inside_compiled_code_reports_the_signal(monkeypatch, capsys):
+    """A handler raising inside a numba function surfaces as ``SystemError: ... returned a
+    result with an exception set``, with or without the signal's exception chained to it."""
+    from texsyn.cli import app
+
+    state = app.State(debug=False, argv=[])
+    chained = SystemError("CPUDispatcher(f) returned a result with an exception set")
+    chained.__context__ = KeyboardInterrupt()
+    assert app.report_error(chained, state) == 130
+    bare = SystemError("CPUDispatcher(f) returned a result with an exception set")
+    monkeypatch.setattr(app, "_RECEIVED", [signal.SIGTERM])
+    assert app.report_error(bare, state) == 143
+    monkeypatch.setattr(app, "_RECEIVED", [])
+    assert app.report_error(bare, state) == 1  # no signal: an internal error
+    err = capsys.readouterr().err.splitlines()
+    assert err[0] == "texsyn: interrupted" and err[1] == "texsyn: terminated"
+    assert err[2].startswith("texsyn: internal error: SystemError")

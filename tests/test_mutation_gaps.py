@@ -253,7 +253,7 @@ def test_builtin_flow_refuses_bad_names(name):
 def test_looped_animation_flows_are_the_simulation_shifted_then_steered_back_to_its_start(grey_exemplar):
     """loop=m: the flow of frame t is the plain simulation's flow of frame t + m (the loop
     starts after an m-frame run-up), until the last m frames, which blend it with the run-up
-    (the simulation n frames earlier) with a weight that grows from 0 towards 1."""
+    (the simulation n frames earlier) with a weight that grows from 1/(m+1) (smoothstep) towards 1."""
     method = texsyn.make_method("grouplets", colour="grey", n_iterations=2, layer_iterations=2).fit(
         grey_exemplar
     )
@@ -269,7 +269,8 @@ def test_looped_animation_flows_are_the_simulation_shifted_then_steered_back_to_
         # the blend is rescaled to the interpolated speed: compare directions of the blend
         w = np.sum((f.flow - a) * (b - a)) / np.sum((b - a) ** 2)
         weights.append(w)
-    assert weights[0] == pytest.approx(0.0, abs=1e-9) and all(x < y for x, y in itertools.pairwise(weights))
+    # smoothstep of 1/4, 2/4, 3/4: 0.16, 0.5, 0.84 (the speed rescaling moves them a little)
+    assert 0.1 < weights[0] < 0.25 and all(x < y for x, y in itertools.pairwise(weights))
     assert weights[-1] < 1
 
 

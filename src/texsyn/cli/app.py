@@ -105,17 +105,28 @@ def _describe_os_error(exc: OSError) -> str:
     return str(exc) or type(exc).__name__
 
 
+#: the signals the handlers of :func:`_install_signal_handlers` received in this process
+_RECEIVED: list[int] = []
+
+
 def _signal_behind(exc: BaseException) -> BaseException:
-    """The signal's exception when ``exc`` is the ``SystemError`` it caused inside compiled code.
+    """The signal's exception when ``exc`` is what the signal caused, not a failure of its own.
 
     A signal handler that raises while a compiled (numba) function runs leaves the exception
     set when the function returns, and the interpreter reports ``SystemError: ... returned a
-    result with an exception set`` with the signal's exception as its cause or context.
+    result with an exception set``, usually with the signal's exception as its cause or
+    context, but not always (the function may run on a worker thread's behalf); so any error
+    that ends a run after one of texsyn's handlers received a signal is that signal's.
     """
-    if isinstance(exc, SystemError):
-        behind = exc.__cause__ or exc.__context__
-        if isinstance(behind, (KeyboardInterrupt, Terminated)):
-            return behind
+    chained: BaseException | None = exc
+    for _ in range(16):  # the chain of causes and contexts
+        if chained is None:
+            break
+        if isinstance(chained, (KeyboardInterrupt, Terminated)):
+            return chained
+        chained = chained.__cause__ or chained.__context__
+    if _RECEIVED:
+        return Terminated() if _RECEIVED[0] == signal.SIGTERM else KeyboardInterrupt()
     return exc
 
 
@@ -196,9 +207,11 @@ def _install_signal_handlers():
     """
     if threading.current_thread() is not threading.main_thread():
         return lambda: None
+    _RECEIVED.clear()
     previous: dict[int, Any] = {}
 
     def handler(signum, frame):
+        _RECEIVED.append(signum)
         for sig in previous:
             signal.signal(sig, signal.SIG_IGN)
         if signum == signal.SIGTERM:
