@@ -9,6 +9,10 @@ The command line, ``texsyn methods``, :meth:`get_params` and the report all read
 (:class:`~texsyn.methods._params.ParamSpec`). ``fit`` stores everything ``sample`` needs in
 attributes ending in ``_``; ``sample`` never changes them, and :func:`texsyn.save` /
 :func:`texsyn.load` keep them in a file (``docs/persistence.md``).
+
+Why this module is long: it is the whole contract every method inherits (parameters and
+their checks, fitting, the memory check, sampling with its result, persistence hooks), and
+splitting it would scatter one class over several files.
 """
 
 from __future__ import annotations
@@ -50,10 +54,15 @@ class SynthesisResult:
     source_map : ndarray of int32, shape (H, W, 2), or None
         Exemplar ``(row, col)`` each output pixel was copied from; ``None`` for methods that
         do not copy pixels.
+    diagnostics : dict or None
+        What a method measured during the run when asked to (for example
+        ``portilla_simoncelli`` with ``record_distance=True``: the statistics distance after
+        every iteration); ``None`` otherwise.
     """
 
     image: np.ndarray
     source_map: np.ndarray | None = None
+    diagnostics: dict | None = None
 
 
 class TextureSynthesizer:
@@ -378,11 +387,13 @@ class TextureSynthesizer:
         out_shape = check_output_shape(default_output_shape(ex.shape) if shape is None else shape)
         self._check_memory(ex.shape, out_shape)
         generator = normalize_rng(rng)
-        image, source = self._sample(out_shape, generator, callback)
+        sampled = self._sample(out_shape, generator, callback)
+        image, source = sampled[0], sampled[1]
+        diagnostics = sampled[2] if len(sampled) > 2 else None
         result = self._as_output(image)
         if source is not None:
             source = np.asarray(source, dtype=np.int32)
-        return SynthesisResult(image=result, source_map=source)
+        return SynthesisResult(image=result, source_map=source, diagnostics=diagnostics)
 
     def _as_output(self, image: np.ndarray) -> np.ndarray:
         """An image as methods return it: the exemplar's rank, float32 clipped to [0, 1]."""
@@ -396,5 +407,6 @@ class TextureSynthesizer:
         shape: tuple[int, int],
         rng: np.random.Generator,
         callback: Callable[[Progress], None] | None,
-    ) -> tuple[np.ndarray, np.ndarray | None]:  # pragma: no cover - abstract
-        raise NotImplementedError
+    ) -> tuple[np.ndarray, np.ndarray | None] | tuple[np.ndarray, np.ndarray | None, dict]:
+        """The method's synthesis: ``(image, source_map)``, or with a third item, its diagnostics."""
+        raise NotImplementedError  # pragma: no cover - abstract

@@ -13,8 +13,8 @@ statistics of complex wavelet coefficients", IJCV 40(1), 2000, and where each st
    :func:`texsyn.drivers.alternating.alternate_projections`.
 
 Colour follows J. Vacher, T. Briand, "The Portilla-Simoncelli texture model: towards
-understanding the early visual cortex", IPOL 2021: the statistics of the principal colour
-axes with every cross-channel correlation. ``docs/methods/portilla_simoncelli.md`` lists the
+understanding the early visual cortex", IPOL 2021: the statistics of the RGB channels with
+every cross-channel correlation (or, with ``colour='pca'``, of the principal colour axes). ``docs/methods/portilla_simoncelli.md`` lists the
 parameters and the deviations from the paper.
 """
 
@@ -28,7 +28,7 @@ import numpy as np
 
 from .._validation import OneOf, Range, as_exemplar
 from ..drivers.alternating import alternate_projections
-from ..models.portilla import PSStatistics, parent_features, ps_statistics
+from ..models.portilla import PSStatistics, parent_features, ps_statistics, statistics_distance
 from ..models.portilla_projections import (
     impose_lowpass_statistics,
     impose_magnitude_statistics,
@@ -38,7 +38,6 @@ from ..models.portilla_projections import (
 )
 from ..ops.canvas import crop_to_output, extend_to_canvas, padded_canvas
 from ..ops.color import ColourSpace, colour_space
-from ..ops.fourier import periodic_smooth_decomposition
 from ..ops.linalg import fixed_order
 from ..ops.patches import as_channels
 from ..ops.progress import Progress, Reporter
@@ -170,9 +169,9 @@ def projection_step(target: PSStatistics, pyramid: ComplexSteerablePyramid, lags
 class PortillaSimoncelli(TextureSynthesizer):
     """Portilla-Simoncelli synthesis by alternating projections onto the joint statistics.
 
-    Colour exemplars are described in their principal colour axes with every cross-channel
-    correlation (not channel by channel). Any output size; the statistics are spatial
-    averages. The exemplar is replaced by its periodic component before analysis.
+    Colour exemplars are described jointly, with every cross-channel correlation (not
+    channel by channel). Any output size; the statistics are spatial averages, measured on
+    the exemplar as it is (paper section 3; the pyramid treats it as periodic).
 
     Parameters
     ----------
@@ -185,9 +184,16 @@ class PortillaSimoncelli(TextureSynthesizer):
     n_iterations : int
         Alternating-projection iterations (the paper uses 50).
     colour : str
-        'pca' (the exemplar's principal colour axes with every cross-channel statistic, the
-        ``'pca'`` space of :mod:`texsyn.ops.color`; 'joint' is its round-1 name) or 'grey'
-        (luma only, grey output).
+        'rgb' (the RGB channels with every cross-channel statistic, Vacher and Briand 2021:
+        each channel's marginals are imposed as the exemplar has them), 'pca' (the
+        exemplar's principal colour axes with every cross-channel statistic, the ``'pca'``
+        space of :mod:`texsyn.ops.color`; 'joint' is its round-1 name; the marginals of the
+        RGB channels then follow only to second order) or 'grey' (luma only, grey output).
+    record_distance : bool
+        Measure, after every iteration, the distance between the image's statistics and the
+        exemplar's (the :func:`texsyn.metrics.ps_distance` families, in the model's
+        channels) and return it with the result (``SynthesisResult.diagnostics``); it costs
+        one more analysis per iteration.
     """
 
     name = "portilla_simoncelli"
@@ -205,13 +211,15 @@ class PortillaSimoncelli(TextureSynthesizer):
         n_orientations: Annotated[int, Range(1, 8)] = 4,
         lags: Annotated[int, Range(0, 8)] = 3,
         n_iterations: Annotated[int, Range(0, 2000)] = 50,
-        colour: Annotated[str, OneOf(("pca", "grey", "joint"))] = "pca",
+        colour: Annotated[str, OneOf(("rgb", "pca", "grey", "joint"))] = "rgb",
+        record_distance: bool = False,
     ):
         self.n_scales = n_scales
         self.n_orientations = n_orientations
         self.lags = lags
         self.n_iterations = n_iterations
         self.colour = colour
+        self.record_distance = record_distance
 
     def min_exemplar_size(self) -> tuple[int, str]:
         side = 2 ** (self.n_scales + 1)
@@ -228,14 +236,13 @@ class PortillaSimoncelli(TextureSynthesizer):
     def _fit(self, exemplar: np.ndarray) -> None:
         self.colour_space_: ColourSpace = colour_space(self.colour, exemplar)
         coords = self._to_channels(exemplar)
-        periodic = periodic_smooth_decomposition(np.moveaxis(coords, 0, -1))[0]
-        # pixel statistics of the exemplar itself; everything spatial from its periodic part
+        # the exemplar as it is: its periodic component would lose the low frequencies of its
+        # smooth part (docs/methods/portilla_simoncelli.md, "Deviations")
         self.statistics_: PSStatistics = ps_statistics(
-            periodic,
+            np.moveaxis(coords, 0, -1),
             n_scales=self.n_scales,
             n_orientations=self.n_orientations,
             lags=self.lags,
-            pixels=coords,
         )
 
     # ------------------------------------------------------------------ memory
@@ -266,25 +273,59 @@ class PortillaSimoncelli(TextureSynthesizer):
         """The working canvas: the output, at least ``2^(n_scales + 1)`` pixels per side."""
         return padded_canvas(shape, minimum=2 ** (self.n_scales + 1))
 
-    def _run(self, initial: np.ndarray, iterations: int, callback) -> np.ndarray:
+    def _run(self, initial: np.ndarray, iterations: int, callback) -> tuple[np.ndarray, dict | None]:
+        """The projections from ``initial``; with ``record_distance``, the distance per iteration."""
         pyramid = ComplexSteerablePyramid(initial.shape[1:], self.n_scales, self.n_orientations, single=True)
-        return ps_synthesis(
-            self.statistics_,
-            initial,
+        step = projection_step(self.statistics_, pyramid, self.lags)
+        history: list[dict[str, float]] = []
+        if self.record_distance:
+            project = step
+
+            def step(x: np.ndarray, iteration: int) -> np.ndarray:
+                x = project(x, iteration)
+                history.append(self.distance_to_exemplar(x, pyramid))
+                return x
+
+        out = alternate_projections(
+            np.asarray(initial, dtype=np.float64).copy(),
+            step,
             iterations,
-            lags=self.lags,
-            pyramid=pyramid,
             reporter=Reporter(callback, "iteration", iterations),
             preview=self._to_image,
         )
+        if not self.record_distance:
+            return out, None
+        families = {key: np.array([h[key] for h in history]) for key in (history[0] if history else {})}
+        mean = np.mean(np.stack(list(families.values())), axis=0) if families else np.zeros(0)
+        return out, {"statistics_distance": mean, "statistics_distance_by_family": families}
+
+    def distance_to_exemplar(
+        self, channels: np.ndarray, pyramid: ComplexSteerablePyramid | None = None
+    ) -> dict[str, float]:
+        """Distance of the statistics of model channels ``(C, H, W)`` to the exemplar's, per family.
+
+        The families of :func:`texsyn.models.portilla.statistics_distance`; their mean is
+        what :func:`texsyn.metrics.ps_distance` reports for images (which it measures on RGB
+        channels rather than the model's).
+        """
+        target = self.statistics_
+        measured = ps_statistics(
+            np.moveaxis(np.asarray(channels, dtype=np.float64), 0, -1),
+            n_scales=target.n_scales,
+            n_orientations=target.n_orientations,
+            lags=self.lags,
+            pyramid=pyramid,
+        )
+        return statistics_distance(measured, target)
 
     def _sample(self, shape, rng, callback):
         h, w = self._canvas(shape)
         moments = self.statistics_.pixel_moments
         noise = rng.standard_normal((moments.shape[0], h, w))
         initial = moments[:, 0, None, None] + np.sqrt(moments[:, 1])[:, None, None] * noise
-        out = self._run(initial, self.n_iterations, callback)
-        return crop_to_output(self._to_image(out), shape), None
+        out, diagnostics = self._run(initial, self.n_iterations, callback)
+        image = crop_to_output(self._to_image(out), shape)
+        return (image, None) if diagnostics is None else (image, None, diagnostics)
 
     @fixed_order
     def refine(
@@ -312,5 +353,5 @@ class PortillaSimoncelli(TextureSynthesizer):
         ch, cw = self._canvas((h, w))
         padded = extend_to_canvas(as_channels(img), (ch, cw), mode="symmetric")
         iterations = self.n_iterations if n_iterations is None else int(n_iterations)
-        out = self._run(self._to_channels(padded), iterations, callback)
+        out, _ = self._run(self._to_channels(padded), iterations, callback)
         return self._as_output(crop_to_output(self._to_image(out), (h, w)))

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._validation import as_exemplar
-from ..models.portilla import PSStatistics
+from ..models.portilla import PSStatistics, statistics_distance
 from ..models.portilla import ps_statistics as model_statistics
 from ..ops.linalg import fixed_order
 from ..transforms.steerable import max_scales
@@ -45,15 +45,8 @@ def ps_distance(image, exemplar, *, n_scales: int = 4, n_orientations: int = 4, 
     scales = min(max_scales(img.shape[:2], n_scales), max_scales(ex.shape[:2], n_scales))
     a = model_statistics(
         img[..., 0] if img.shape[2] == 1 else img, n_scales=scales, n_orientations=n_orientations, lags=lags
-    ).groups()
+    )
     b = model_statistics(
         ex[..., 0] if ex.shape[2] == 1 else ex, n_scales=scales, n_orientations=n_orientations, lags=lags
-    ).groups()
-    out = []
-    for key, ref in b.items():
-        other = a[key]
-        if other.shape != ref.shape:  # auto-correlation windows cut by a smaller image
-            n = min(other.size, ref.size)
-            other, ref = other[:n], ref[:n]
-        out.append(np.linalg.norm(other - ref) / max(float(np.linalg.norm(ref)), 1e-12))
-    return float(np.mean(out))
+    )
+    return float(np.mean(list(statistics_distance(a, b).values())))

@@ -28,6 +28,7 @@ __all__ = [
     "phase_doubled",
     "pixel_statistics",
     "ps_statistics",
+    "statistics_distance",
 ]
 
 
@@ -164,6 +165,25 @@ class PSStatistics:
             "phase": np.concatenate([a.ravel() for a in self.real_cross + self.real_parent]),
             "highpass": self.highpass_variance.ravel(),
         }
+
+
+def statistics_distance(statistics: PSStatistics, reference: PSStatistics) -> dict[str, float]:
+    """Relative distance between two sets of statistics, family by family.
+
+    For each family of :meth:`PSStatistics.groups` (pixel, low-pass, magnitude,
+    cross-correlation, phase, high-pass): the Euclidean distance divided by the norm of the
+    reference's family. Auto-correlation windows cut short by a small image are compared on
+    their common part. :func:`texsyn.metrics.ps_distance` is the mean over the families.
+    """
+    mine = statistics.groups()
+    out = {}
+    for key, ref in reference.groups().items():
+        other = mine[key]
+        if other.shape != ref.shape:  # auto-correlation windows cut by a smaller image
+            n = min(other.size, ref.size)
+            other, ref = other[:n], ref[:n]
+        out[key] = float(np.linalg.norm(other - ref) / max(float(np.linalg.norm(ref)), 1e-12))
+    return out
 
 
 def phase_doubled(parent: np.ndarray) -> np.ndarray:
