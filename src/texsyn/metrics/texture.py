@@ -125,6 +125,25 @@ def sharpness_ratio(image, exemplar) -> float:
     return mean_gradient(img) / reference
 
 
+def contrast_ratio(image, exemplar) -> float:
+    """Standard deviation of the image's luma over that of the exemplar's.
+
+    About 1 when the synthesis keeps the exemplar's contrast; below 1 for a washed-out or
+    averaged one (issue 19: the locally Gaussian models), above 1 for one with outliers.
+
+    Examples
+    --------
+    >>> ex = np.random.default_rng(0).random((16, 16))
+    >>> round(contrast_ratio(0.5 + 0.5 * (ex - 0.5), ex), 6)
+    0.5
+    """
+    img, ex = check_pair(image, exemplar)
+    reference = float(np.std(_grey(ex)))
+    if reference == 0:
+        raise ValueError("the exemplar is flat (zero contrast); the contrast ratio is undefined")
+    return float(np.std(_grey(img))) / reference
+
+
 def laplacian_band_energies(image, levels: int = 3) -> np.ndarray:
     """Mean squared coefficient per pixel of every band of a Laplacian tight frame.
 

@@ -62,17 +62,26 @@ class LocalGaussian:
         values: np.ndarray,
         sigma: float,
         rng: np.random.Generator | None,
+        *,
+        looseness: float = 0.0,
     ) -> np.ndarray:
         """Sample (or, with ``rng=None``, the mean of) the unknown entries given the known ones.
 
         The model is regularised, ``Gamma = Sigma + sigma^2 I``; with ``A = F[S]``,
-        ``B = F[R]`` (``S`` unknown, ``R`` known entries) and ``M = B^T B + sigma^2 I_m``,
+        ``B = F[R]`` (``S`` unknown, ``R`` known entries) and ``M = B^T B + s^2 I_m``,
         Woodbury's identity gives the conditional law of the unknown entries exactly:
 
         * mean ``mu_S + A M^{-1} B^T (y0 - mu_R)``,
-        * covariance ``sigma^2 (I + A M^{-1} A^T)``, sampled as
-          ``sigma (z1 + A C^{-T} z2)`` with ``M = C C^T``.
+        * covariance ``sigma^2 I + s^2 A M^{-1} A^T``, sampled as
+          ``sigma z1 + s A C^{-T} z2`` with ``M = C C^T``.
 
+        With ``looseness = 0``, ``s = sigma`` (the paper's eqs. 4-6). Otherwise the known
+        values are read as noisy observations of the patch, ``s^2 = max(sigma^2, looseness
+        tr(B^T B) / m)``: a multiple of the mean eigenvalue of ``B^T B``. The ``k`` known
+        values are explained by ``m << k`` neighbours, so with the paper's tiny ``sigma`` they
+        fix all ``m`` degrees of freedom of the local Gaussian (its posterior covariance
+        vanishes, nothing is sampled) and the regression carries the overlap's blur into
+        the new patch (``docs/methods/local_gaussian.md``, "Conditioning").
         Cost ``O(m^2 D + m^3)`` instead of the ``O(D^3)`` of the D x D formulas.
 
         Parameters
@@ -85,6 +94,9 @@ class LocalGaussian:
             Regularisation, ``sigma > 0``.
         rng : numpy.random.Generator or None
             ``None`` returns the conditional mean (the most probable patch, eq. 5).
+        looseness : float
+            How loosely the unknown entries follow the known ones (0: the paper's exact
+            conditioning).
 
         Returns
         -------
@@ -98,7 +110,9 @@ class LocalGaussian:
         f_known = self.factor[known]
         f_free = self.factor[~known]
         m = self.factor.shape[1]
-        gram = f_known.T @ f_known + (sigma**2) * np.eye(m)
+        gram = f_known.T @ f_known
+        noise = max(float(sigma) ** 2, float(looseness) * float(np.trace(gram)) / m)
+        gram[np.diag_indices(m)] += noise
         chol = linalg.cho_factor(gram, lower=True)
         beta = linalg.cho_solve(chol, f_known.T @ (values - self.mean[known]))
         mean = self.mean[~known] + f_free @ beta
@@ -108,7 +122,7 @@ class LocalGaussian:
         z2 = rng.standard_normal(m)
         # C^{-T} z2 solves C^T x = z2 with C lower triangular
         x = linalg.solve_triangular(chol[0], z2, lower=True, trans="T")
-        return mean + sigma * (z1 + f_free @ x)
+        return mean + sigma * z1 + np.sqrt(noise) * (f_free @ x)
 
 
 def local_gaussian(samples: np.ndarray) -> LocalGaussian:
