@@ -3,13 +3,18 @@
 Usage::
 
     python benchmarks/bench_quality.py [--textures DIR] [--methods NAME ...] [--limit N]
+                                       [--grey] [--details FILE] [--sheets DIR]
                                        [--sizes 128 256 512 1024] [--budget SECONDS]
                                        [--out benchmarks/quality.md] [--plot benchmarks/time_vs_size.png]
 
 For every image of ``--textures`` (``../shared/textures`` beside the repository by
 default), cropped to at most 128x128, each method synthesises twice the exemplar size with
-seed 0 and default parameters; the table gives, per method, the median wall time (fit +
-sample) and the median of every metric of :func:`texsyn.metrics.evaluate`.
+seed 0 and default parameters (with ``--grey``, colour exemplars are also run as their
+luma); the table gives, per method, the median wall time (fit + sample), the median of every
+metric of :func:`texsyn.metrics.evaluate` and how many outputs keep both the sharpness and
+the contrast ratio within 0.8-1.2. ``--details`` writes one table per method with every
+exemplar's figures; ``--sheets`` writes one contact sheet per exemplar (the exemplar, then
+each method's output, in the order of ``--methods``).
 
 The second part times each method on one 128x128 colour exemplar for output sides of
 ``--sizes`` and plots time against size (log-log, needs matplotlib: ``pip install
@@ -29,8 +34,9 @@ from pathlib import Path
 import numpy as np
 
 import texsyn
-from texsyn.io import read_image
+from texsyn.io import read_image, write_image
 from texsyn.metrics import METRIC_DESCRIPTIONS, evaluate
+from texsyn.ops import luma
 
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_TEXTURES = REPO.parent / "shared" / "textures"
@@ -54,10 +60,37 @@ def load_textures(folder: Path, limit: int | None) -> list[tuple[str, np.ndarray
     return out
 
 
-def quality_table(textures, methods) -> tuple[list[str], dict]:
+def with_grey(textures):
+    """The textures, and every colour one also as its luma (label suffixed ' (grey)')."""
+    out = []
+    for label, ex in textures:
+        out.append((label, ex))
+        if ex.ndim == 3:
+            out.append((f"{label} (grey)", luma(ex).astype(np.float32)))
+    return out
+
+
+def within(scores: dict) -> bool:
+    """Sharpness and contrast ratios both within 0.8-1.2 (issue 19's acceptance band)."""
+    return all(0.8 <= scores[k] <= 1.2 for k in ("sharpness_ratio", "contrast_ratio"))
+
+
+def contact_sheet(exemplar: np.ndarray, outputs: list[np.ndarray]) -> np.ndarray:
+    """The exemplar (top-left of a tile) then each output, side by side, 4-pixel gaps."""
+    tiles = [exemplar] + outputs
+    side = max(t.shape[0] for t in tiles)
+    rgb = [np.repeat(t[..., None], 3, axis=2) if t.ndim == 2 else t for t in tiles]
+    padded = [np.pad(t, ((0, side - t.shape[0] + 4), (0, 4), (0, 0)), constant_values=1.0) for t in rgb]
+    return np.concatenate([p[:side] for p in padded], axis=1)
+
+
+def quality_table(textures, methods, details=None, sheets=None) -> tuple[list[str], dict]:
     per_method: dict[str, dict[str, list[float]]] = {m: {"seconds": []} for m in methods}
     failures: dict[str, list[str]] = {m: [] for m in methods}
+    rows: dict[str, list[str]] = {m: [] for m in methods}
+    keys = list(METRIC_DESCRIPTIONS)
     for label, ex in textures:
+        outputs = []
         for name in methods:
             try:
                 start = time.perf_counter()
@@ -65,30 +98,57 @@ def quality_table(textures, methods) -> tuple[list[str], dict]:
                 seconds = time.perf_counter() - start
             except ValueError as exc:  # e.g. exemplar smaller than the method's patch
                 failures[name].append(f"{label}: {exc}")
+                outputs.append(np.ones((2 * ex.shape[0], 2 * ex.shape[1]) + ex.shape[2:], np.float32))
                 continue
+            outputs.append(out)
             scores = evaluate(out, ex)
             per_method[name]["seconds"].append(seconds)
+            per_method[name].setdefault("within", []).append(float(within(scores)))
             for key, value in scores.items():
                 per_method[name].setdefault(key, []).append(value)
+            rows[name].append(
+                f"| {label} | {seconds:.2f} | " + " | ".join(f"{scores[k]:.4g}" for k in keys) + " |"
+            )
+        if sheets is not None:
+            sheets.mkdir(parents=True, exist_ok=True)
+            grey = label.endswith(" (grey)")
+            stem = label.removesuffix(" (grey)").rsplit(".", 1)[0].replace("/", "_") + (
+                "_grey" if grey else ""
+            )
+            write_image(sheets / f"sheet_{stem}.png", contact_sheet(ex, outputs))
             print(
                 f"{label:40s} {name:15s} {seconds:8.3f} s  coherence {scores['patch_coherence']:.4f}  copied {scores['copied_share']:.3f}",
                 flush=True,
             )
-    keys = list(METRIC_DESCRIPTIONS)
     lines = [
-        "| method | textures | median time (s) | " + " | ".join(k.replace("_", " ") for k in keys) + " |",
-        "|---|---:|---:|" + "---:|" * len(keys),
+        "| method | textures | median time (s) | sharpness and contrast in 0.8-1.2 | "
+        + " | ".join(k.replace("_", " ") for k in keys)
+        + " |",
+        "|---|---:|---:|---:|" + "---:|" * len(keys),
     ]
     for name in methods:
         data = per_method[name]
         if not data["seconds"]:
-            lines.append(f"| {name} | 0 | | " + " | ".join("" for _ in keys) + " |")
+            lines.append(f"| {name} | 0 | | | " + " | ".join("" for _ in keys) + " |")
             continue
         cells = " | ".join(f"{statistics.median(data[k]):.4g}" for k in keys)
         lines.append(
-            f"| {name} | {len(data['seconds'])} | {statistics.median(data['seconds']):.3f} | {cells} |"
+            f"| {name} | {len(data['seconds'])} | {statistics.median(data['seconds']):.3f} | "
+            f"{int(sum(data['within']))} | {cells} |"
         )
     notes = [f"- {name}: skipped {f}" for name, fs in failures.items() for f in fs]
+    if details is not None:
+        text = ["# Every exemplar, method by method", ""]
+        for name in methods:
+            text += [
+                f"## {name}",
+                "",
+                "| exemplar | time (s) | " + " | ".join(k.replace("_", " ") for k in keys) + " |",
+                "|---|---:|" + "---:|" * len(keys),
+                *rows[name],
+                "",
+            ]
+        details.write_text("\n".join(text))
     return lines + ([""] + notes if notes else []), per_method
 
 
@@ -138,12 +198,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--limit", type=int, default=None, help="use only the first N textures")
     parser.add_argument("--sizes", type=int, nargs="*", default=[128, 256, 512, 1024])
     parser.add_argument("--budget", type=float, default=60.0)
+    parser.add_argument("--grey", action="store_true", help="also run colour exemplars as their luma")
+    parser.add_argument("--details", type=Path, default=None, help="one table per method, every exemplar")
+    parser.add_argument("--sheets", type=Path, default=None, help="a contact sheet per exemplar here")
     parser.add_argument("--out", type=Path, default=REPO / "benchmarks" / "quality.md")
     parser.add_argument("--plot", type=Path, default=REPO / "benchmarks" / "time_vs_size.png")
     args = parser.parse_args(argv)
 
     textures = load_textures(args.textures, args.limit)
-    table, _ = quality_table(textures, args.methods)
+    if args.grey:
+        textures = with_grey(textures)
+    table, _ = quality_table(textures, args.methods, args.details, args.sheets)
     lines = [
         "# texsyn methods over a texture folder",
         "",

@@ -80,14 +80,16 @@ def test_clg_keeps_overlaps_and_rclg_moves_them_by_about_theta(monkeypatch):
 
     monkeypatch.setattr(module, "local_gaussian", lambda x: Spy(original(x)))
     # CLG: the conditioning values are the synthesised overlap, which is then left unchanged
-    clg = texsyn.make_method("clg", patch_size=10, n_neighbors=8, seed_patch="copy").fit(ex)
+    clg = texsyn.make_method("clg", patch_size=10, n_neighbors=8, seed_patch="copy", histogram="none").fit(ex)
     out = clg.sample((15, 15), rng=0)  # canvas 15x15: seed patch plus one to the right
     assert len(records) == 3
     np.testing.assert_allclose(out[:10, 5:10].astype(np.float64), ex_patch_at_seed(ex, 0)[:, 5:10], atol=1e-6)
     records.clear()
     # RCLG: conditioning values are the overlap plus noise of std theta
     theta = 0.05
-    rclg = texsyn.make_method("rclg", patch_size=10, n_neighbors=8, theta=theta, seed_patch="copy").fit(ex)
+    rclg = texsyn.make_method(
+        "rclg", patch_size=10, n_neighbors=8, theta=theta, seed_patch="copy", histogram="none"
+    ).fit(ex)
     out = rclg.sample((10, 15), rng=0)
     moved = out[:10, 5:10].astype(np.float64) - ex_patch_at_seed(ex, 0)[:, 5:10]
     inside = (out[:10, 5:10] > 0) & (out[:10, 5:10] < 1)
@@ -104,10 +106,14 @@ def ex_patch_at_seed(ex, seed, n=10):
 def test_gaussian_seed_is_not_an_exemplar_patch_and_copy_seed_is():
     ex = texsyn.data.exemplar("gravel", size=40)
     for name in ("lg", "clg"):
-        out = texsyn.make_method(name, patch_size=10, n_neighbors=8).fit(ex).sample((20, 20), rng=4)
+        out = (
+            texsyn.make_method(name, patch_size=10, n_neighbors=8, histogram="none")
+            .fit(ex)
+            .sample((20, 20), rng=4)
+        )
         field = metrics.nearest_patch_field(out[:10, :10], ex, patch_size=10)
         assert field.distance.min() > 0
-    clg = texsyn.make_method("clg", patch_size=10, n_neighbors=8, seed_patch="copy").fit(ex)
+    clg = texsyn.make_method("clg", patch_size=10, n_neighbors=8, seed_patch="copy", histogram="none").fit(ex)
     out = clg.sample((20, 20), rng=4)
     np.testing.assert_allclose(out[:10, :10], ex_patch_at_seed(ex, 4), atol=1e-7)
 
@@ -154,7 +160,9 @@ def test_more_neighbours_give_a_smoother_result():
     # the most probable patches (mode='mean') average more neighbours: steadily smoother
     energies = [
         gradient_energy(
-            texsyn.synthesize(ex, "lg", (96, 96), rng=2, patch_size=16, n_neighbors=m, mode="mean")
+            texsyn.synthesize(
+                ex, "lg", (96, 96), rng=2, patch_size=16, n_neighbors=m, mode="mean", histogram="none"
+            )
         )
         for m in (10, 50, 150)
     ]
@@ -163,7 +171,12 @@ def test_more_neighbours_give_a_smoother_result():
     ex = texsyn.data.exemplar("grass", size=128)
     sampled = [
         np.mean(
-            [gradient_energy(texsyn.synthesize(ex, "lg", (128, 128), rng=s, n_neighbors=m)) for s in range(2)]
+            [
+                gradient_energy(
+                    texsyn.synthesize(ex, "lg", (128, 128), rng=s, n_neighbors=m, histogram="none")
+                )
+                for s in range(2)
+            ]
         )
         for m in (10, 50, 150)
     ]
@@ -287,11 +300,32 @@ def test_a_loose_conditional_really_samples_where_the_exact_one_does_not():
 @pytest.mark.method("rclg")
 @pytest.mark.parametrize("name", ["clg", "rclg"])
 def test_conditional_models_keep_the_exemplars_sharpness_and_contrast(name):
-    """Grass 64 -> 96, patch 16, 20 neighbours, seeds 0-1. Measured sharpness / contrast
-    ratios: clg 0.93-0.97 / 0.79-0.82, rclg 0.96-0.99 / 0.81-0.85; with the paper's exact
-    conditioning (looseness=0, theta 5/255) 0.51-0.72 / 0.56-0.60: a blur right after the seed."""
+    """Grass 64 -> 96, patch 16, 20 neighbours, seeds 0-1, defaults. Measured sharpness /
+    contrast ratios: clg 1.06 / 1.00, rclg 1.05-1.11 / 1.00; round 1 (exact conditioning,
+    theta 5/255, no marginals) 0.51-0.72 / 0.56-0.60: a blur right after the seed patch."""
     exemplar = texsyn.data.exemplar("grass", size=64)
     for seed in (0, 1):
         out = texsyn.synthesize(exemplar, name, (96, 96), rng=seed, patch_size=16, n_neighbors=20)
-        assert metrics.sharpness_ratio(out, exemplar) > 0.85, (seed, metrics.sharpness_ratio(out, exemplar))
-        assert metrics.contrast_ratio(out, exemplar) > 0.72, (seed, metrics.contrast_ratio(out, exemplar))
+        assert 0.85 < metrics.sharpness_ratio(out, exemplar) < 1.2, (
+            seed,
+            metrics.sharpness_ratio(out, exemplar),
+        )
+        assert 0.9 < metrics.contrast_ratio(out, exemplar) < 1.1, (
+            seed,
+            metrics.contrast_ratio(out, exemplar),
+        )
+
+
+@pytest.mark.parametrize("name", ["lg", "mslg", "clg", "rclg"])
+def test_the_gaussian_family_stays_inside_the_exemplars_range(name):
+    """Gaussian draws have unbounded tails: without the final marginals (histogram='none')
+    lg puts 55-68 pixels of a 96x96 output outside gravel's and grass's range, mslg 56-186
+    (brick too); with them (the default) none is."""
+    for texture in ("gravel", "grass", "brick"):
+        exemplar = texsyn.data.exemplar(texture, size=64)
+        out = texsyn.synthesize(exemplar, name, (96, 96), rng=0, patch_size=16, n_neighbors=20)
+        assert out.min() >= exemplar.min() and out.max() <= exemplar.max(), texture
+    raw = texsyn.synthesize(
+        exemplar, "mslg", (96, 96), rng=0, patch_size=16, n_neighbors=20, histogram="none"
+    )
+    assert np.sum((raw < exemplar.min()) | (raw > exemplar.max())) > 50  # the test can fail

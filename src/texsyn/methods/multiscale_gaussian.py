@@ -38,7 +38,14 @@ from ..transforms.steerable import max_scales
 from ._base import TextureSynthesizer
 from ._memory import fft_search_bytes, output_bytes, shape_dims
 from .portilla_simoncelli import PortillaSimoncelli
-from .single_scale_gaussian import PASTE, clamp_neighbours, draw, local_gaussian_bytes, single_scale
+from .single_scale_gaussian import (
+    PASTE,
+    clamp_neighbours,
+    draw,
+    local_gaussian_bytes,
+    match_exemplar_marginals,
+    single_scale,
+)
 
 __all__ = ["MSLG", "ZOOM_SIGMA"]
 
@@ -72,6 +79,13 @@ class MSLG(TextureSynthesizer):
     zoom_boundary : str
         Boundary handling of the Fourier zoom-in: ``'symmetric'`` (mirror extension, no
         border ringing) or ``'periodic'`` (the paper's literal formula).
+    coarse_seam : str
+        How the coarsest scale's patches join: ``'quilt'`` (boundary cut) or ``'average'``
+        (eq. 15, the paper's; averaging two draws in every overlap removes up to half of the
+        coarse scale's variance: ``docs/methods/local_gaussian.md``, "Deviations").
+    histogram : str
+        ``'match'`` gives the output the exemplar's histogram per channel at the end
+        (``docs/methods/local_gaussian.md``, "Marginals"), before ``post``; ``'none'`` skips it.
     post : str
         ``'portilla_simoncelli'`` uses the MSLG result as the initial image of a short
         Portilla-Simoncelli synthesis (Raad et al. 2016, section 5, Fig. 8); ``'none'`` skips it.
@@ -97,6 +111,8 @@ class MSLG(TextureSynthesizer):
         mode: Annotated[str, OneOf(("sample", "mean"))] = "sample",
         seed_patch: Annotated[str, OneOf(("gaussian", "copy"))] = "gaussian",
         zoom_boundary: Annotated[str, OneOf(("symmetric", "periodic"))] = "symmetric",
+        coarse_seam: Annotated[str, OneOf(("quilt", "average"))] = "quilt",
+        histogram: Annotated[str, OneOf(("match", "none"))] = "match",
         post: Annotated[str, OneOf(("none", "portilla_simoncelli"))] = "none",
         post_iterations: Annotated[int, Range(1, 500)] = 10,
     ):
@@ -106,6 +122,8 @@ class MSLG(TextureSynthesizer):
         self.mode = mode
         self.seed_patch = seed_patch
         self.zoom_boundary = zoom_boundary
+        self.coarse_seam = coarse_seam
+        self.histogram = histogram
         self.post = post
         self.post_iterations = post_iterations
 
@@ -204,7 +222,7 @@ class MSLG(TextureSynthesizer):
 
         def scale(level: int, coarser: np.ndarray | None) -> np.ndarray:
             reporter = Reporter(callback, f"scale {n_scales - level}/{n_scales}")
-            if coarser is None:  # the coarsest scale: LG with averaged overlaps
+            if coarser is None:  # the coarsest scale: LG, patches joined by `coarse_seam`
                 return single_scale(
                     self.scales_[-1],
                     self.coarse_source_,
@@ -212,7 +230,7 @@ class MSLG(TextureSynthesizer):
                     overlap=n // 2,
                     m=m,
                     model="lg",
-                    seam="average",
+                    seam=self.coarse_seam,
                     mode=self.mode,
                     sigma=0.0,
                     theta=0.0,
@@ -224,6 +242,8 @@ class MSLG(TextureSynthesizer):
             return self._fine_scale(low, self.fine_sources_[level], m, rng, reporter)
 
         out = crop_to_output(coarse_to_fine(scale, n_scales)[0], shape)
+        if self.histogram == "match":
+            out = match_exemplar_marginals(out, self.exemplar_)
         if self.post_ is not None:
             report = Reporter(callback, "portilla_simoncelli")
             out = self.post_.refine(np.clip(out, 0.0, 1.0), callback=report.relabel(report.stage))

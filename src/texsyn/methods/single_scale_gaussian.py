@@ -32,6 +32,8 @@ from ..drivers.raster import Block, block_canvas, block_positions, fill_blocks
 from ..errors import InputError
 from ..models.gaussian import LocalGaussian, PatchSource
 from ..ops.canvas import crop_to_output
+from ..ops.histogram import match_histogram
+from ..ops.patches import as_channels
 from ..ops.progress import Reporter
 from ..ops.seams import paste_average, paste_cut
 from ._deprecation import warn_deprecated
@@ -210,6 +212,20 @@ def conditional_patch(
         entries, given, sigma, None if mode == "mean" else rng, looseness=looseness
     )
     return flat.reshape(old.shape)
+
+
+def match_exemplar_marginals(image: np.ndarray, exemplar: np.ndarray) -> np.ndarray:
+    """Give every channel of ``image`` ``(H, W, C)`` the histogram of the exemplar's channel.
+
+    The LG family's optional last step (``histogram='match'``; not in Raad et al. 2016,
+    ``docs/methods/local_gaussian.md``, "Marginals"): Gaussian draws have unbounded tails
+    (LG's bright specks) and blends of ``m`` neighbours lose part of the contrast; exact
+    matching (:func:`texsyn.ops.histogram.match_histogram`, ties by position) keeps every
+    value inside the exemplar's range and restores its marginals.
+    """
+    x = np.asarray(image, dtype=np.float64)
+    ex = as_channels(np.asarray(exemplar, dtype=np.float64))
+    return np.stack([match_histogram(x[..., c], ex[..., c]) for c in range(x.shape[2])], axis=-1)
 
 
 #: line 8, how a new patch joins the block: boundary cut, average (eq. 15) or overwrite
