@@ -10,6 +10,10 @@ coarse-to-fine loop over ``J`` scales gives large-scale coherence. The paper's s
 functions that implement them and our resolutions of its open points are in
 ``docs/methods/sparse.md``.
 
+Why this module is long: besides Algorithm 1 (with its convergence test and energy curve)
+the class carries the five ablation modes of Fig. 4, the memory model and the persistence of
+texsyn 0.1's in-memory state (``fitted_state``), which must stay with the class it rebuilds.
+
 References
 ----------
 G. Tartavel, Y. Gousseau, G. Peyré, "Constrained sparse texture synthesis", SSVM 2013.
@@ -33,12 +37,23 @@ from ..ops.histogram import HistogramMatcher
 from ..ops.linalg import matmul
 from ..ops.patches import average_patches, extract_patches
 from ..ops.progress import Reporter
-from ..ops.sparse import box_power, constrained_matching_pursuit, image_energy, image_update, upsample_bicubic
+from ..ops.sparse import (
+    SpectrumProjector,
+    box_power,
+    constrained_matching_pursuit,
+    image_energy,
+    image_update,
+    upsample_bicubic,
+)
 from ._base import TextureSynthesizer
 from ._memory import output_bytes, pixel_count, shape_dims, sparse_fit_bytes
 
 __all__ = ["ConstrainedSparse", "MODES", "image_energy", "image_update", "upsample_bicubic"]
 
+#: default convergence tolerance: relative decrease of the energy (3) below its best value
+TOLERANCE = 5e-3
+#: outer iterations in a row without that decrease after which a scale has converged
+PATIENCE = 3
 #: the step-by-step study of the paper's Fig. 4, each mode adding one ingredient
 MODES = ("basic", "frequency", "graphcut", "multiscale", "full")
 FORMAT_VERSION = 1  # of the deprecated in-memory state (fitted_state, texsyn 0.1)
@@ -90,8 +105,17 @@ class ConstrainedSparse(TextureSynthesizer):
         constraint), 'graphcut' (+ graph-cut reconstruction), 'multiscale' (+ scales),
         'full' (+ low-pass term, the complete procedure).
     lowpass_ref : str
-        Reference of the low-pass term: 'mean' (the exemplar's mean colour, any size) or
-        'aligned' (the exemplar itself; only when the output fits inside it).
+        Reference of the low-pass term: 'spectrum' (the output projected on the exemplar's
+        Fourier modulus, :class:`texsyn.ops.sparse.SpectrumProjector`: translation invariant,
+        keeps the exemplar's large-scale energy), 'mean' (the exemplar's mean colour, which
+        flattens large-scale variation; texsyn <= 0.3's default) or 'aligned' (the exemplar
+        itself; only when the output fits inside it).
+    spectrum_weight : float
+        With ``lowpass_ref='spectrum'``: the per-frequency weight of the term is
+        ``max(|h^|^2, spectrum_weight)``. 0 is the paper's low-pass weighting (the box's
+        ``|h^|^2``); the default 1 weights every frequency alike, so the term keeps the
+        exemplar's whole Fourier modulus (the spectrum constraint of the authors' JMIV 2015
+        sequel; ``docs/methods/sparse.md``, "Low-pass reference", for the measurements).
     final_histogram : bool
         Impose the exemplar's histogram on the returned image.
     random_offset : bool
@@ -101,7 +125,10 @@ class ConstrainedSparse(TextureSynthesizer):
     ksvd_training : int
         Training patches drawn per K-SVD iteration.
     tolerance : float
-        Stop a scale early when the relative change of the image falls below this.
+        Convergence criterion of a scale: stop when the energy (3) has not gone below
+        ``(1 - tolerance)`` times its lowest value so far for ``PATIENCE`` (3) outer
+        iterations in a row; 0 runs all ``n_outer``. The energy of every outer iteration is
+        returned in ``sample_with_map(...).diagnostics``.
     fit_rng : int
         Seed of the randomness of fit (K-SVD initialisation and subsets); ``sample`` takes
         its own ``rng``. Formerly ``random_state`` (deprecated).
@@ -151,12 +178,13 @@ class ConstrainedSparse(TextureSynthesizer):
         n_outer: Annotated[int, Range(1, 1000)] = 30,
         n_inner: Annotated[int, Range(1, 1000)] = 10,
         mode: Annotated[str, OneOf(MODES)] = "full",
-        lowpass_ref: Annotated[str, OneOf(("mean", "aligned"))] = "mean",
+        lowpass_ref: Annotated[str, OneOf(("spectrum", "mean", "aligned"))] = "spectrum",
+        spectrum_weight: Annotated[float, Range(0.0, 1.0)] = 1.0,
         final_histogram: bool = True,
         random_offset: bool = False,
         ksvd_iterations: Annotated[int, Range(1, 1000)] = 20,
         ksvd_training: Annotated[int, Range(10, 10**7)] = 8000,
-        tolerance: Annotated[float, Range(0.0, 1.0)] = 1e-4,
+        tolerance: Annotated[float, Range(0.0, 1.0)] = TOLERANCE,
         fit_rng: Annotated[int, Range(0, 2**32 - 1)] = 0,
     ):
         self.patch_size = patch_size
@@ -170,6 +198,7 @@ class ConstrainedSparse(TextureSynthesizer):
         self.n_inner = n_inner
         self.mode = mode
         self.lowpass_ref = lowpass_ref
+        self.spectrum_weight = spectrum_weight
         self.final_histogram = final_histogram
         self.random_offset = random_offset
         self.ksvd_iterations = ksvd_iterations
@@ -272,10 +301,21 @@ class ConstrainedSparse(TextureSynthesizer):
         return padded_canvas(shape, minimum=q * -(-2 * self.patch_size // self.step), multiple=q)
 
     def _sample(self, shape, rng, callback):
-        """Algorithm 1, steps 3-4, from the coarsest scale to the finest (section 4.3)."""
+        """Algorithm 1, steps 3-4, from the coarsest scale to the finest (section 4.3).
+
+        Returns the image and the diagnostics: ``energy``, the energy (3) after every outer
+        iteration (linear data term ``(1/Z)||Pi(u) - D W||^2``, coarsest scale first),
+        ``energy_scale`` (the scale of each entry), and per scale, coarsest first,
+        ``iterations`` and ``converged`` (the criterion of ``tolerance`` was met before
+        ``n_outer``).
+        """
         tau, step, s = self.patch_size, self.step, self.sparsity
         canvas = self._canvas(shape)
         seconds = {"coding": 0.0, "reconstruction": 0.0, "image_update": 0.0}
+        energies: list[float] = []
+        energy_scale: list[int] = []
+        iterations: list[int] = []
+        converged: list[bool] = []
         u = None
         for j in reversed(range(self._scales)):
             scale = self.model_.scales[j]
@@ -294,9 +334,12 @@ class ConstrainedSparse(TextureSynthesizer):
             projector = HistogramMatcher(scale.sorted, size[0] * size[1], pca=scale.pca)
             # the weights and targets of the energy (6) at this scale
             power = box_power(size, tau)
+            if self.lowpass_ref == "spectrum" and self.spectrum_weight > 0:
+                power = np.maximum(power, self.spectrum_weight)
             energy = dict(alpha=self.alpha, beta=self._beta, box_power=power, reference=reference)
             dictionary = scale.dictionary
             gram = dictionary.T @ dictionary
+            best, stalled, done, history = np.inf, 0, False, []
             for outer in range(self.n_outer):
                 offset = rng.integers(step, size=2) if self.random_offset else np.zeros(2, dtype=int)
                 shifted = np.roll(u, (-offset[0], -offset[1]), axis=(0, 1))
@@ -318,6 +361,12 @@ class ConstrainedSparse(TextureSynthesizer):
                 u = image_update(u, recon, projector, n_steps=self.n_inner, rng=rng, **energy)  # section 4.1
                 seconds["image_update"] += time.perf_counter() - clock
                 change = np.linalg.norm(u - previous) / max(np.linalg.norm(u), 1e-12)
+                history.append(self._energy(u, coded, offset, projector, energy))
+                if history[-1] < best * (1.0 - self.tolerance):
+                    best, stalled = history[-1], 0
+                else:  # the graph cuts and the greedy pursuit make the energy jitter
+                    stalled += 1
+                    done = self.tolerance > 0 and stalled >= PATIENCE
                 if report.active:
                     info = {
                         "scale": j,
@@ -325,20 +374,41 @@ class ConstrainedSparse(TextureSynthesizer):
                         "budget": budget,
                         "usage": np.count_nonzero(codes, axis=1),
                         "relative_change": change,
+                        "energy": history[-1],
                         "seconds": dict(seconds),
                     }
                     report(outer + 1, info=info)
-                if change < self.tolerance:
+                if done:
                     break
+            energies += history
+            energy_scale += [j] * len(history)
+            iterations.append(len(history))
+            converged.append(done)
         out = crop_to_output(u, shape)
         if self.final_histogram:
             finest = self.model_.scales[0]
             out = HistogramMatcher(finest.sorted, out.shape[0] * out.shape[1], pca=finest.pca)(out, rng)
-        return out, None
+        diagnostics = {
+            "energy": np.asarray(energies),
+            "energy_scale": np.asarray(energy_scale, dtype=np.int64),
+            "iterations": np.asarray(iterations, dtype=np.int64),
+            "converged": np.asarray(converged, dtype=bool),
+        }
+        return out, None, diagnostics
 
-    def _reference(self, scale: SparseScale, size: tuple[int, int]) -> np.ndarray:
-        """``u_ref`` of the low-pass term: the exemplar's mean colour, or the exemplar itself."""
+    def _energy(self, u, coded, offset, projector, energy) -> float:
+        """The energy (3) of ``u`` and the codes of its (offset) grid, linear data term (eq. 6)."""
+        shifted = np.roll(u, (-offset[0], -offset[1]), axis=(0, 1))
+        terms = dict(energy)
+        if isinstance(terms["reference"], np.ndarray):
+            terms["reference"] = np.roll(terms["reference"], (-offset[0], -offset[1]), axis=(0, 1))
+        return image_energy(shifted, coded, self.patch_size, self.step, projector, **terms)
+
+    def _reference(self, scale: SparseScale, size: tuple[int, int]):
+        """``u_ref`` of the low-pass term: a spectrum projection, the mean colour or the exemplar."""
         image = scale.image
+        if self.lowpass_ref == "spectrum":
+            return SpectrumProjector(image, size)
         if self.lowpass_ref == "aligned":
             if image.shape[0] >= size[0] and image.shape[1] >= size[1]:
                 return image[: size[0], : size[1]]
