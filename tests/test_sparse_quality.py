@@ -1,7 +1,7 @@
 """Constrained sparse synthesis, issue 19 item 2: what the fixes of the low-pass term, the
 K-SVD update and the convergence criterion change (``docs/methods/sparse.md``).
 
-Each test fails on texsyn <= 0.3's behaviour, which a parameter still restores:
+Each test fails on texsyn 0.2's behaviour, which a parameter still restores:
 ``lowpass_ref='mean'`` (the constant low-pass reference), ``ksvd(update='power')`` (one
 power step per atom) and ``tolerance=0`` (no convergence test: every scale runs ``n_outer``
 iterations; the old sampler returned no energy curve at all).
@@ -40,7 +40,7 @@ def clustered_patches(rng, dim=12, n_atoms=6, per_atom=40):
 def test_ksvd_atom_update_is_the_leading_singular_vector_of_its_users(seed):
     # One iteration with 1-sparse codes: every atom must become the leading left singular
     # vector of the patches that use it (Aharon et al. 2006, IV-B). The one power step of
-    # texsyn <= 0.3 (update='power') is off by max 1 - |cos| = 1.4e-2, 1.7e-2, 3.0e-1 on
+    # texsyn 0.2 (update='power') is off by max 1 - |cos| = 1.4e-2, 1.7e-2, 3.0e-1 on
     # seeds 0-2; the exact update agrees to 7e-16.
     rng = np.random.default_rng(seed)
     x = clustered_patches(rng)
@@ -83,7 +83,7 @@ def test_ksvd_reports_its_errors_and_stops_when_they_stall():
     )
     # measured: the relative error falls from 0.26 to the noise floor 8.6e-6 and the
     # criterion stops it after 24 of the 60 iterations allowed; the curve is the energy of
-    # eq. (1) on the training patches (texsyn <= 0.3 ran all iterations and returned none)
+    # eq. (1) on the training patches (texsyn 0.2 ran all iterations and returned none)
     assert 3 <= errors.size < 60
     assert errors[-1] < 0.01 * errors[0]
     full = ksvd(
@@ -102,7 +102,7 @@ def lowpass_term(u: np.ndarray, reference, tau: int) -> float:
 
 def test_spectrum_reference_is_translation_invariant_and_keeps_the_exemplars_low_frequencies():
     # The exemplar (seen periodically) and all its translates are minimisers (term 0) of the
-    # 'spectrum' low-pass term; the constant 'mean' reference of texsyn <= 0.3 penalises them
+    # 'spectrum' low-pass term; the constant 'mean' reference of texsyn 0.2 penalises them
     # all by the same positive amount, i.e. it pulls the output's large-scale variation to flat.
     ex = texsyn.data.exemplar("gravel", size=32).astype(np.float64)[..., None]
     periodic = ex
@@ -164,7 +164,7 @@ def full_output(method, reference: str) -> np.ndarray:
     return _OUTPUTS[reference]
 
 
-# Measured with FAST, 64 -> 128, seeds 0-2 ('mean' with tolerance=0, as texsyn <= 0.3 ran):
+# Measured with FAST, 64 -> 128, seeds 0-2 ('mean' with tolerance=0, as texsyn 0.2 ran):
 #   spread ratio std(h*u)/std(h*u0), h 12x12:  gravel: spectrum 1.079-1.084   mean 0.34-0.37
 #                                             grass:  spectrum 1.289-1.292   mean 0.57-0.58
 #                                             brick:  spectrum 1.110-1.125   mean 0.76-0.80
@@ -212,7 +212,7 @@ def test_sample_returns_the_energy_curve_and_stops_when_it_converges(gravel_mode
     runner.n_outer = 40
     result = runner.sample_with_map((96, 96), rng=1)
     diag = result.diagnostics
-    assert diag is not None  # texsyn <= 0.3 returned no diagnostics
+    assert diag is not None  # texsyn 0.2 returned no diagnostics
     energy, where = diag["energy"], diag["energy_scale"]
     assert energy.shape == where.shape and energy.size == diag["iterations"].sum()
     assert np.all(np.isfinite(energy)) and np.all(energy > 0)
@@ -224,5 +224,5 @@ def test_sample_returns_the_energy_curve_and_stops_when_it_converges(gravel_mode
     assert diag["converged"].all()
     assert np.all(diag["iterations"] < 40)
     endless = copy.deepcopy(method)
-    endless.n_outer, endless.tolerance = 6, 0.0  # texsyn <= 0.3: every scale ran n_outer
+    endless.n_outer, endless.tolerance = 6, 0.0  # texsyn 0.2: every scale ran n_outer
     assert endless.sample_with_map((96, 96), rng=1).diagnostics["iterations"].tolist() == [6, 6]

@@ -108,7 +108,7 @@ class ConstrainedSparse(TextureSynthesizer):
         Reference of the low-pass term: 'spectrum' (the output projected on the exemplar's
         Fourier modulus, :class:`texsyn.ops.sparse.SpectrumProjector`: translation invariant,
         keeps the exemplar's large-scale energy), 'mean' (the exemplar's mean colour, which
-        flattens large-scale variation; texsyn <= 0.3's default) or 'aligned' (the exemplar
+        flattens large-scale variation; texsyn 0.2's default) or 'aligned' (the exemplar
         itself; only when the output fits inside it).
     spectrum_weight : float
         With ``lowpass_ref='spectrum'``: the per-frequency weight of the term is

@@ -200,7 +200,7 @@ def ksvd(
         iterations in a row. ``0`` runs every iteration.
     update : {'svd', 'power'}
         'svd': the exact K-SVD atom update; 'power': one power-iteration step (the
-        "approximate K-SVD" of texsyn <= 0.3, kept for comparisons).
+        "approximate K-SVD" of texsyn 0.2, kept for comparisons).
     return_errors : bool
         Also return the relative coding error of every iteration run (the energy of eq. 1
         on that iteration's training subset, before its dictionary update).
