@@ -11,17 +11,11 @@ import copy
 
 import numpy as np
 import pytest
-from scipy import ndimage
 
 import texsyn
+from texsyn.metrics import box_null_energy_share as null_band_share
+from texsyn.metrics import local_mean_spread
 from texsyn.ops.sparse import SpectrumProjector, batch_omp, box_power, ksvd
-
-
-def local_mean_spread(image: np.ndarray, box: int) -> float:
-    """``std(h * u)`` with ``h`` the ``box x box`` mean filter (periodic), over all channels."""
-    u = np.asarray(image, dtype=np.float64)
-    size = (box, box) + ((1,) if u.ndim == 3 else ())
-    return float(ndimage.uniform_filter(u, size=size, mode="wrap").std())
 
 
 # ------------------------------------------------------------------------------- K-SVD
@@ -131,21 +125,6 @@ FAST = dict(patch_size=8, step=4, n_scales=2, n_atoms=32, ksvd_iterations=4, n_o
 def gravel_model():
     ex = texsyn.data.exemplar("gravel", size=64).astype(np.float64)
     return ex, texsyn.make_method("sparse", **FAST).fit(ex)
-
-
-def null_band_share(image: np.ndarray, tau: int) -> float:
-    """Share of the energy (mean removed, frequencies below 0.3) where the ``tau`` box's
-    ``|h^|^2 < 0.01``: the zeros of the low-pass filter, where the constant reference pushed
-    the output's large-scale energy as rows of ``tau/k``-periodic ridges."""
-    x = np.asarray(image, dtype=np.float64)
-    x = x - x.mean(axis=(0, 1))
-    power = np.abs(np.fft.fft2(x, axes=(0, 1))) ** 2
-    power = power.sum(axis=2) if power.ndim == 3 else power
-    fy = np.fft.fftfreq(x.shape[0])[:, None]
-    fx = np.fft.fftfreq(x.shape[1])[None, :]
-    nulls = (np.sinc(tau * fy) * np.sinc(tau * fx)) ** 2 < 0.01
-    band = np.maximum(abs(fy), abs(fx)) < 0.3
-    return float(power[band & nulls].sum() / power.sum())
 
 
 def tiles(image: np.ndarray, side: int):

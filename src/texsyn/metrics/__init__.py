@@ -22,9 +22,11 @@ from .patches import (
 )
 from .statistics import ps_distance, ps_statistics
 from .texture import (
+    box_null_energy_share,
     contrast_ratio,
     histogram_distance,
     laplacian_band_energies,
+    local_mean_spread,
     mean_coherence,
     mean_gradient,
     radial_log_spectrum,
@@ -35,6 +37,7 @@ from .texture import (
 __all__ = [
     "METRIC_DESCRIPTIONS",
     "CopyMap",
+    "box_null_energy_share",
     "NearestPatchField",
     "completeness",
     "contrast_ratio",
@@ -43,6 +46,7 @@ __all__ = [
     "histogram_distance",
     "innovation",
     "laplacian_band_energies",
+    "local_mean_spread",
     "mean_coherence",
     "mean_gradient",
     "nearest_patch_field",
