@@ -8,6 +8,7 @@ import pytest
 from PIL import Image
 
 import texsyn
+from conftest import FAST_PARAMS
 from texsyn.cli import main
 from texsyn.io import read_image
 
@@ -251,6 +252,36 @@ def test_synth_writes_a_sidecar_with_method_parameters_seed_and_command(tmp_path
     assert side["options"]["size"] == [40, 32]
     assert shlex.split(side["command_line"]) == ["texsyn"] + [str(a) for a in args]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ex.png", "out.png", "out.png.json", "where.npy"]
+
+
+def test_synth_writes_the_methods_diagnostics_into_the_sidecar(tmp_path, exemplar_file, capsys):
+    out = tmp_path / "ps.png"
+    ps = ("-p", "n_scales=2", "-p", "n_iterations=3", "-p", "record_distance=true")
+    code, _, err = run(
+        capsys, "synth", exemplar_file, "-o", out, "-m", "portilla_simoncelli", *ps, "--size", "32x32", "-q"
+    )
+    assert code == 0, err
+    diagnostics = json.loads((tmp_path / "ps.png.json").read_text())["diagnostics"]
+    assert diagnostics is not None  # texsyn 0.2 dropped what record_distance measured
+    distance = diagnostics["statistics_distance"]
+    assert len(distance) == 3 and all(isinstance(d, float) for d in distance)
+    by_family = diagnostics["statistics_distance_by_family"]
+    assert by_family and all(len(v) == 3 and all(isinstance(d, float) for d in v) for v in by_family.values())
+    out = tmp_path / "sparse.png"
+    small = [f"{k}={v}" for k, v in FAST_PARAMS["sparse"].items()]
+    args = [a for p in small for a in ("-p", p)]
+    code, _, err = run(
+        capsys, "synth", exemplar_file, "-o", out, "-m", "sparse", *args, "--size", "24x24", "-q"
+    )
+    assert code == 0, err
+    diagnostics = json.loads((tmp_path / "sparse.png.json").read_text())["diagnostics"]
+    energy = diagnostics["energy"]
+    assert energy and all(isinstance(e, float) and e > 0 for e in energy)
+    assert len(diagnostics["energy_scale"]) == len(energy) == sum(diagnostics["iterations"])
+    assert all(isinstance(c, bool) for c in diagnostics["converged"])
+    out = tmp_path / "rp.png"
+    assert run(capsys, "synth", exemplar_file, "-o", out, "-m", "random_phase", "-q")[0] == 0
+    assert json.loads((tmp_path / "rp.png.json").read_text())["diagnostics"] is None
 
 
 def test_a_drawn_seed_is_printed_recorded_and_reproduces_the_texture(tmp_path, exemplar_file, capsys):

@@ -6,6 +6,7 @@ from scipy import ndimage
 
 import texsyn
 from texsyn import metrics
+from texsyn.errors import InputError
 from texsyn.ops import nearest_both_ways
 
 
@@ -122,3 +123,22 @@ def test_metrics_reject_mismatched_channels(exemplar):
         metrics.histogram_distance(np.dstack([exemplar] * 3), exemplar)
     with pytest.raises(ValueError, match="flat"):
         metrics.sharpness_ratio(exemplar, np.zeros((10, 10)))
+
+
+def test_contrast_ratio_refuses_an_exemplar_without_luma_contrast(exemplar):
+    g = exemplar
+    # red against green at equal BT.601 luma: 0.299 R + 0.587 G = 0.4 everywhere
+    red = 0.3 + 0.5 * g
+    iso = np.stack([red, (0.4 - 0.299 * red) / 0.587, np.full_like(g, 0.4)], axis=-1)
+    assert np.std(texsyn.ops.luma(iso)) < 1e-12
+    other = np.stack([g, g, g], axis=-1)
+    with pytest.raises(InputError, match="no luma contrast.*luma only"):
+        metrics.contrast_ratio(other, iso)  # texsyn 0.2: about 1e15
+    with pytest.raises(InputError, match="no luma contrast"):
+        metrics.evaluate(other, iso)  # as sharpness_ratio on a flat exemplar: passed on
+    with pytest.raises(InputError, match="no luma contrast"):
+        metrics.contrast_ratio(g, np.full_like(g, 0.5))
+    faint = iso.copy()
+    faint[..., 2] += 0.2 * (g - g.mean())  # blue moves luma by 0.114 * that: above 1 % of the channels'
+    assert np.isfinite(metrics.contrast_ratio(other, faint))
+    assert metrics.contrast_ratio(iso, other) == pytest.approx(0.0, abs=1e-9)  # the image may be flat

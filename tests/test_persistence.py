@@ -21,7 +21,7 @@ import pytest
 import texsyn
 from conftest import fast_method
 from texsyn.errors import InputError, InputFileNotFoundError, MemoryLimitError, OutputExistsError
-from texsyn.persistence import FORMAT_VERSION
+from texsyn.persistence import ADDED_PARAMS, DEFAULT, FORMAT_VERSION
 
 
 @pytest.fixture(scope="module")
@@ -170,6 +170,107 @@ def test_texsyn_0_1_names_still_work_with_a_warning(saved_random_phase, tmp_path
         warnings.simplefilter("error")
         loaded = load_fitted(path)
     assert loaded.sample((8, 8), rng=0).tobytes() == model.sample((8, 8), rng=0).tobytes()
+
+
+def _strip_params(path, target, *names):
+    """A copy of a saved model without some parameters: a file written before they existed."""
+    with np.load(path, allow_pickle=False) as data:
+        header = json.loads(str(data["header"]))
+    params = {k: v for k, v in header["params"].items() if k not in names}
+    return _rewrite(path, target, params=params)
+
+
+#: the parameters of every method in texsyn 0.2.0, the first release with model files
+PARAMS_0_2_0 = {
+    "clg": "patch_size n_neighbors overlap sigma mode seed_patch seam".split(),
+    "cwt": "levels window tolerance seed candidates filters refine refine_radius".split(),
+    "efros_leung": "window_size tolerance max_error seed_size".split(),
+    "grouplets": (
+        "flow n_iterations levels grouplet_levels sigma presmooth colour tau viscosity "
+        "texture_viscosity speed initial_flow n_projections keep_speed"
+    ).split(),
+    "heeger_bergen": "n_scales n_orientations n_iterations periodic_component".split(),
+    "lg": "patch_size n_neighbors overlap mode seed_patch seam".split(),
+    "mslg": "patch_size n_neighbors n_scales mode seed_patch zoom_boundary post post_iterations".split(),
+    "patch_wavelet": (
+        "min_width max_resolution sigma feature_width embedding_dim lle_neighbors "
+        "lle_points exemplar_boundary candidates fit_rng"
+    ).split(),
+    "portilla_simoncelli": "n_scales n_orientations lags n_iterations colour".split(),
+    "quilting": "patch_size overlap tolerance boundary_cut".split(),
+    "random_phase": "periodic_component".split(),
+    "rclg": "patch_size n_neighbors overlap sigma theta mode seed_patch seam".split(),
+    "sparse": (
+        "patch_size step n_scales sparsity n_atoms alpha beta n_outer n_inner mode "
+        "lowpass_ref final_histogram random_offset ksvd_iterations ksvd_training "
+        "tolerance fit_rng"
+    ).split(),
+    "wei_levoy": "levels window parent_window search leaf_size fit_rng".split(),
+}
+
+
+def test_every_parameter_added_since_0_2_0_has_its_old_value_in_the_table():
+    for name, cls in texsyn.METHODS.items():
+        added = [k for k in cls.param_specs() if k not in PARAMS_0_2_0.get(name, [])]
+        assert sorted(ADDED_PARAMS.get(name, {})) == sorted(added), name
+        for key, entry in ADDED_PARAMS.get(name, {}).items():
+            if entry.old is not DEFAULT:
+                cls.param_specs()[key].check(entry.old, name)  # an allowed value
+
+
+OLD_FILES = [
+    ("lg", {"histogram": "none"}),
+    ("clg", {"histogram": "none", "looseness": 0.0}),
+    ("rclg", {"histogram": "none", "looseness": 0.0}),
+    ("mslg", {"coarse_seam": "average", "histogram": "none"}),
+]
+
+
+@pytest.mark.parametrize("name, old", OLD_FILES, ids=[n for n, _ in OLD_FILES])
+def test_a_file_older_than_a_parameter_loads_with_its_old_value_and_one_warning(
+    name, old, colour_exemplar, tmp_path
+):
+    model = fast_method(name).fit(colour_exemplar)
+    path = _strip_params(texsyn.save(model, tmp_path / "new.npz"), tmp_path / "old.npz", *old)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        loaded = texsyn.load(path)  # texsyn 0.2 loaded the newer defaults without a word
+    assert len(caught) == 1, [str(w.message) for w in caught]
+    assert caught[0].category is UserWarning
+    message = str(caught[0].message)
+    assert "old.npz' was written by texsyn" in message
+    for key, value in old.items():
+        assert getattr(loaded, key) == value
+        assert f"{key}={value!r}" in message
+    then = texsyn.make_method(name, **{**model.get_params(), **old}).fit(colour_exemplar)
+    assert loaded.sample((20, 24), rng=3).tobytes() == then.sample((20, 24), rng=3).tobytes()
+
+
+def test_a_parameter_given_to_load_or_with_an_unchanged_default_gives_no_warning(colour_exemplar, tmp_path):
+    model = fast_method("clg").fit(colour_exemplar)
+    path = _strip_params(
+        texsyn.save(model, tmp_path / "new.npz"), tmp_path / "old.npz", "histogram", "looseness"
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        loaded = texsyn.load(path, histogram="match", looseness=0.5)
+    assert (loaded.histogram, loaded.looseness) == ("match", 0.5)
+    with pytest.warns(UserWarning, match=r"parameter looseness: loaded with looseness=0\.0") as caught:
+        assert texsyn.load(path, histogram="match").looseness == 0.0
+    assert len(caught) == 1
+    ps = texsyn.make_method("portilla_simoncelli", n_scales=2, n_iterations=1).fit(colour_exemplar)
+    ps_path = _strip_params(texsyn.save(ps, tmp_path / "ps.npz"), tmp_path / "ps_old.npz", "record_distance")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the old value is the default: nothing to say
+        assert texsyn.load(ps_path).record_distance is False
+
+
+def test_a_missing_parameter_the_table_does_not_know_keeps_its_default_with_a_warning(
+    saved_random_phase, tmp_path
+):
+    path = _strip_params(saved_random_phase[1], tmp_path / "edited.npz", "periodic_component")
+    with pytest.warns(UserWarning, match="periodic_component=True .its default"):
+        assert texsyn.load(path).periodic_component is True
 
 
 def test_sparse_random_state_is_a_deprecated_name_of_fit_rng():

@@ -150,6 +150,22 @@ def test_mslg_post_processing_moves_toward_the_exemplar_statistics():
     assert ps_distance(post, exemplar, n_scales=3) < ps_distance(plain, exemplar, n_scales=3)
 
 
+def test_mslg_post_processing_and_refine_take_outputs_down_to_one_pixel():
+    exemplar = texsyn.data.exemplar("brick", size=32)
+    params = dict(patch_size=8, n_neighbors=8, n_scales=2, post="portilla_simoncelli", post_iterations=1)
+    method = texsyn.make_method("mslg", **params).fit(exemplar)
+    for shape in [(1, 1), (1, 6), (5, 1)]:  # as mslg and portilla_simoncelli alone sample them
+        # texsyn 0.2: "image is 1x1 pixels; at least 2x2 is needed", naming no image of the user's
+        assert method.sample(shape, rng=0).shape == shape
+    ps = texsyn.make_method("portilla_simoncelli", n_scales=2, n_iterations=1).fit(exemplar)
+    out = ps.refine(np.full((1, 3), 0.4))
+    assert out.shape == (1, 3) and out.dtype == np.float32
+    with pytest.raises(texsyn.errors.InputError, match="values must lie in"):
+        ps.refine(np.full((1, 3), 2.0))  # the other checks of an image still apply
+    with pytest.raises(texsyn.errors.InputError, match="3x0 pixels"):
+        ps.refine(np.zeros((0, 3)))
+
+
 def test_agrees_with_plenoptic_when_installed():
     """Our grey statistics equal plenoptic's PortillaSimoncelli ones after its documented
     normalisations: corrected variance (N - 1) in the pixel moments; auto-correlations divided

@@ -31,6 +31,11 @@ texsyn 0.1's layout.
 
 Files written by texsyn 0.1's ``texsyn.io.save_fitted`` (the ``sparse`` method only) are
 read too.
+
+A file holds every parameter its method had when it was written, so a parameter missing from
+it is one the method gained since. :data:`ADDED_PARAMS` records, for each such parameter,
+the value that gives what the file's model did; :func:`load` fills it in and says so in one
+warning, instead of letting the newer default change the model's outputs silently.
 """
 
 from __future__ import annotations
@@ -38,6 +43,7 @@ from __future__ import annotations
 import json
 import os
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -53,11 +59,13 @@ from .io.files import pixel_amount
 from .methods import METHODS, TextureSynthesizer
 
 __all__ = [
+    "ADDED_PARAMS",
     "COMPRESSION_FLOOR_BYTES",
     "FORMAT_NAME",
     "FORMAT_VERSION",
     "MAX_COMPRESSION_RATIO",
     "MAX_HEADER_CHARS",
+    "AddedParam",
     "load",
     "save",
 ]
@@ -73,6 +81,63 @@ SUFFIX = ".npz"
 MAX_HEADER_CHARS = 1_000_000
 _FITTED = "fitted/"
 _LEGACY_KEYS = ("format_version", "method", "params", "exemplar")
+
+
+class _Default:
+    def __repr__(self) -> str:
+        return "DEFAULT"
+
+
+#: :attr:`AddedParam.old` for a parameter whose current default is what older files get
+DEFAULT = _Default()
+
+
+@dataclass(frozen=True)
+class AddedParam:
+    """A parameter a method gained after model files existed (``docs/persistence.md``).
+
+    Attributes
+    ----------
+    after : str
+        The last texsyn release whose files lack it.
+    old : object
+        The value that gives what a model saved without it did; :data:`DEFAULT` where the
+        current default does (or where nothing can: the note says why).
+    note : str
+        Why that value, for the reader of this table.
+    """
+
+    after: str
+    old: Any
+    note: str = ""
+
+
+_NO_HISTOGRAM = AddedParam("0.2.0", "none", "outputs were the model's draws, not histogram-matched")
+_EXACT = AddedParam("0.2.0", 0.0, "the paper's exact conditioning on the overlap")
+
+#: Parameters added to each method since model files exist (texsyn 0.2.0), with the value that
+#: reproduces a file written before them. :func:`load` fills a parameter missing from a file
+#: with it; where that is not the current default it warns once, naming the parameters. A
+#: test checks that every parameter a method gained since 0.2.0 is listed here.
+ADDED_PARAMS: dict[str, dict[str, AddedParam]] = {
+    "lg": {"histogram": _NO_HISTOGRAM},
+    "clg": {"looseness": _EXACT, "histogram": _NO_HISTOGRAM},
+    "rclg": {"looseness": _EXACT, "histogram": _NO_HISTOGRAM},
+    "mslg": {
+        "coarse_seam": AddedParam("0.2.0", "average", "the coarsest patches were averaged (eq. 15)"),
+        "histogram": _NO_HISTOGRAM,
+    },
+    "portilla_simoncelli": {"record_distance": AddedParam("0.2.0", False, "no diagnostics were returned")},
+    "sparse": {
+        "spectrum_weight": AddedParam(
+            "0.2.0", DEFAULT, "used only with lowpass_ref='spectrum', which older files do not hold"
+        )
+    },
+    "grouplets": {
+        name: AddedParam("0.2.0", DEFAULT, "0.2.0's grouplet model and animation are gone (CHANGELOG)")
+        for name in ("turbulence", "flow_scale", "spectrum_slope", "advection", "renewal", "layer_iterations")
+    },
+}
 
 
 def _plain(value: Any, where: str) -> Any:
@@ -286,6 +351,7 @@ def load(path: str | os.PathLike, **params: Any) -> TextureSynthesizer:
                     "learned (fit the exemplar again instead)"
                 )
         values = {**saved, **changes}
+        filled = _fill_added_params(name, values, specs)
         for key, spec in specs.items():
             if spec.type is tuple and isinstance(values.get(key), list):
                 values[key] = tuple(values[key])
@@ -295,4 +361,37 @@ def load(path: str | os.PathLike, **params: Any) -> TextureSynthesizer:
         archive.check_sizes(["exemplar", *fitted_keys])
         exemplar = as_exemplar(archive.read("exemplar"), name=f"the exemplar in '{archive.name}'")
         fitted = {k[len(_FITTED) :] if k.startswith(_FITTED) else k: archive.read(k) for k in fitted_keys}
-    return model.restore_fitted(exemplar, fitted)
+    restored = model.restore_fitted(exemplar, fitted)
+    if filled:
+        version = header.get("texsyn_version", "?")
+        warnings.warn(
+            f"'{archive.name}' was written by texsyn {version!s:.20} before method {name!r} had the "
+            f"parameter{'s' if len(filled) > 1 else ''} {', '.join(filled)}: loaded with "
+            f"{', '.join(filled.values())}; pass other values to texsyn.load to change them",
+            UserWarning,
+            stacklevel=2,
+        )
+    return restored
+
+
+def _fill_added_params(name: str, values: dict[str, Any], specs: dict) -> dict[str, str]:
+    """Fill the parameters ``values`` lacks from :data:`ADDED_PARAMS`.
+
+    Returns what the warning says of each parameter set off its current default, and of each
+    missing parameter the table does not know (it keeps its default: a file edited by hand,
+    or a table to complete).
+    """
+    reported: dict[str, str] = {}
+    for key, spec in specs.items():
+        if key in values:
+            continue
+        added = ADDED_PARAMS.get(name, {}).get(key)
+        if added is None:
+            reported[key] = f"{key}={spec.default!r} (its default; texsyn does not know its older value)"
+        elif added.old is not DEFAULT:
+            values[key] = added.old
+            if added.old != spec.default:
+                reported[key] = (
+                    f"{key}={added.old!r} (as that model had it; the default now is {spec.default!r})"
+                )
+    return reported

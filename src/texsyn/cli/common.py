@@ -150,9 +150,11 @@ def stage_extra(outputs: OutputSet, path: Path | None, array: np.ndarray, pictur
 
 
 def jsonable(value):
-    """``value`` with NumPy scalars, tuples and non-finite floats made JSON-ready."""
+    """``value`` with NumPy arrays (as nested lists), scalars, tuples and non-finite floats made JSON-ready."""
     if isinstance(value, dict):
         return {str(k): jsonable(v) for k, v in value.items()}
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
     if isinstance(value, (list, tuple)):
         return [jsonable(v) for v in value]
     if isinstance(value, np.generic):
@@ -173,9 +175,22 @@ def command_line() -> str:
 
 
 def sidecar_json(
-    command: str, *, outputs: dict, inputs: dict, method: str, params: dict, seed, options: dict
+    command: str,
+    *,
+    outputs: dict,
+    inputs: dict,
+    method: str,
+    params: dict,
+    seed,
+    options: dict,
+    diagnostics: dict | None = None,
 ) -> str:
-    """The JSON written beside a command's main output: enough to know and redo what made it."""
+    """The JSON written beside a command's main output: enough to know and redo what made it.
+
+    ``diagnostics`` (:attr:`texsyn.methods.SynthesisResult.diagnostics`, what the method
+    measured during the run) is written with its arrays as lists; ``null`` when it measured
+    nothing.
+    """
     record = {
         "texsyn_sidecar": 1,
         "texsyn_version": __version__,
@@ -188,6 +203,7 @@ def sidecar_json(
         "params": params,
         "seed": seed,
         "options": options,
+        "diagnostics": diagnostics,
     }
     return json.dumps(jsonable(record), indent=2) + "\n"
 

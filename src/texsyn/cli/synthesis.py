@@ -146,6 +146,7 @@ def synth(
         params=synthesizer.get_params(),
         seed=seed,
         options={"size": [w, h], "bit_depth": depth},
+        diagnostics=result.diagnostics,
     )
     with outputs:
         outputs.write_image(out_path, result.image, bit_depth=depth)
@@ -168,7 +169,7 @@ def synth(
     type=Number(0.0, 1.0),
     default=0.5,
     show_default=True,
-    help="Threshold as a fraction of the largest detail: 0 rebuilds INPUT, 1 is a pure synthesis.",
+    help="Share of INPUT whose details are removed (or, with --thresholding coefficient, the threshold as a fraction of the largest detail): 0 rebuilds INPUT, 1 is a pure synthesis.",
 )
 @output_option("Output image (.png, .jpg, .tif).")
 @click.option(
@@ -190,6 +191,13 @@ def synth(
     help="Border rule of the transform (periodic for an INPUT that tiles).",
 )
 @click.option("--per-level", is_flag=True, help="Threshold every level against its own largest detail.")
+@click.option(
+    "--thresholding",
+    type=click.Choice(["local", "coefficient"]),
+    default="local",
+    show_default=True,
+    help="Remove details by regions of low detail energy, or one by one as in the paper (section 5.2).",
+)
 @param_option("Parameter of the patch_wavelet method (repeatable).")
 @bit_depth_option
 @overwrite_option()
@@ -204,6 +212,7 @@ def modify(
     no_equalize,
     boundary,
     per_level,
+    thresholding,
     params,
     bit_depth,
     overwrite,
@@ -238,6 +247,7 @@ def modify(
             equalize=not no_equalize,
             grid_boundary=boundary,
             per_level=per_level,
+            thresholding=thresholding,
             callback=bar,
         )
     finally:
@@ -256,6 +266,7 @@ def modify(
             "equalize": not no_equalize,
             "boundary": boundary,
             "per_level": per_level,
+            "thresholding": thresholding,
             "bit_depth": depth,
         },
     )

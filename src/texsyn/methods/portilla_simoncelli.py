@@ -340,12 +340,15 @@ class PortillaSimoncelli(TextureSynthesizer):
         Used to post-process another method's output with the exemplar's statistics (Raad
         et al. 2016, section 5, Fig. 8: MSLG followed by Portilla-Simoncelli).
 
+        ``image`` may be as small as an output (1x1): it is extended to the working canvas
+        anyway, so an exemplar's 2x2 minimum does not apply.
+
         Returns
         -------
         ndarray of float32 in [0, 1], the image's size, the exemplar's channels.
         """
         exemplar = self._require_fitted()
-        img = np.asarray(as_exemplar(image, name="image"), dtype=np.float64)
+        img = _as_refined_image(image)
         h, w = img.shape[:2]
         self._check_memory(
             exemplar.shape, (h, w), task=f"refining a {w}x{h} image", advice="use a smaller image"
@@ -355,3 +358,17 @@ class PortillaSimoncelli(TextureSynthesizer):
         iterations = self.n_iterations if n_iterations is None else int(n_iterations)
         out, _ = self._run(self._to_channels(padded), iterations, callback)
         return self._as_output(crop_to_output(self._to_image(out), (h, w)))
+
+
+def _as_refined_image(image) -> np.ndarray:
+    """``image`` checked as :func:`~texsyn._validation.as_exemplar` checks it, 1-pixel sides allowed.
+
+    MSLG's ``post`` refines outputs of any size, down to 1x1 (as the methods sample them);
+    a side of 1 is repeated to 2 for the checks and cropped back.
+    """
+    arr = np.asarray(image)
+    h, w = arr.shape[:2] if arr.ndim >= 2 else (0, 0)
+    if arr.ndim in (2, 3) and min(h, w) == 1:
+        pad = [(0, 2 - min(h, 2)), (0, 2 - min(w, 2))] + [(0, 0)] * (arr.ndim - 2)
+        return as_exemplar(np.pad(arr, pad, mode="edge"), name="image")[:h, :w].astype(np.float64)
+    return np.asarray(as_exemplar(image, name="image"), dtype=np.float64)

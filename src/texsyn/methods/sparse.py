@@ -306,8 +306,9 @@ class ConstrainedSparse(TextureSynthesizer):
         Returns the image and the diagnostics: ``energy``, the energy (3) after every outer
         iteration (linear data term ``(1/Z)||Pi(u) - D W||^2``, coarsest scale first),
         ``energy_scale`` (the scale of each entry), and per scale, coarsest first,
-        ``iterations`` and ``converged`` (the criterion of ``tolerance`` was met before
-        ``n_outer``).
+        ``iterations`` and ``converged`` (the criterion of ``tolerance`` was met, at the
+        latest on the ``n_outer``-th iteration; false for a scale the cap stopped first, and
+        whenever ``tolerance`` is 0).
         """
         tau, step, s = self.patch_size, self.step, self.sparsity
         canvas = self._canvas(shape)

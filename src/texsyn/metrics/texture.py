@@ -11,6 +11,7 @@ import numpy as np
 from scipy.ndimage import uniform_filter
 
 from .._validation import as_exemplar
+from ..errors import InputError
 from ..ops import as_channels, luma, periodic_smooth_decomposition, transport_energy
 from ..ops.flow import structure_tensor_orientation
 from ..transforms.pyramids import LaplacianTightFrame
@@ -126,11 +127,28 @@ def sharpness_ratio(image, exemplar) -> float:
     return mean_gradient(img) / reference
 
 
+#: :func:`contrast_ratio` needs the exemplar's luma deviation above this (values in [0, 1])...
+MIN_LUMA_STD = 1e-6
+#: ...and above this share of the deviation of its most varied colour channel
+MIN_LUMA_SHARE = 0.01
+
+
 def contrast_ratio(image, exemplar) -> float:
     """Standard deviation of the image's luma over that of the exemplar's.
 
     About 1 when the synthesis keeps the exemplar's contrast; below 1 for a washed-out or
     averaged one (issue 19: the locally Gaussian models), above 1 for one with outliers.
+    Luma only (BT.601 ``Y`` of a colour image, a grey image as it is): the contrast of hue
+    and saturation is not measured.
+
+    Raises
+    ------
+    InputError
+        When the exemplar has no luma contrast: its luma deviation is at most
+        :data:`MIN_LUMA_STD`, or, for colour, under :data:`MIN_LUMA_SHARE` of the deviation of
+        its most varied channel (a flat or isoluminant exemplar, whose ratio would divide by
+        almost zero). Like :func:`sharpness_ratio` on a flat exemplar, :func:`evaluate`
+        passes the error on.
 
     Examples
     --------
@@ -140,8 +158,13 @@ def contrast_ratio(image, exemplar) -> float:
     """
     img, ex = check_pair(image, exemplar)
     reference = float(np.std(_grey(ex)))
-    if reference == 0:
-        raise ValueError("the exemplar is flat (zero contrast); the contrast ratio is undefined")
+    channels = float(np.max(np.std(ex, axis=(0, 1))))
+    if reference <= MIN_LUMA_STD or reference < MIN_LUMA_SHARE * channels:
+        raise InputError(
+            f"the exemplar has no luma contrast (luma standard deviation {reference:.3g}, its colour "
+            f"channels' up to {channels:.3g}): contrast_ratio compares luma only, so it is undefined "
+            "for a flat or isoluminant exemplar"
+        )
     return float(np.std(_grey(img))) / reference
 
 

@@ -3,8 +3,9 @@
 The boundary cut is Efros and Freeman's (2001, section 2.1): the pixels of the overlap are
 split along the path of least accumulated squared error, vertical, horizontal or L-shaped
 (``docs/methods/quilting.md``). :func:`paste_cut` and :func:`paste_average` are the two
-joining rules of the raster patch loop (:mod:`texsyn.drivers.raster`): quilting and LG join
-blocks along the cut, MSLG's coarsest scale averages the overlap (Raad et al. 2016, eq. 15).
+joining rules of the raster patch loop (:mod:`texsyn.drivers.raster`): quilting, LG and (by
+default) MSLG's coarsest scale join blocks along the cut; averaging the overlap is Raad et
+al. 2016's eq. 15 (LG's ``seam='average'``, MSLG's ``coarse_seam='average'``).
 """
 
 from __future__ import annotations

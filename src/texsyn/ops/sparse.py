@@ -489,12 +489,24 @@ def image_update(
     """Gradient steps on the energy (6) for fixed codes (Tartavel et al. 2013, eq. 7).
 
     ``g = 2 (u - R) + 2 alpha (u - T_hist(u)) + 2 beta h_bar * h * (u - u_ref)`` with step
-    ``eta = 1 / (2 (1 + alpha + beta))``: half the inverse of the gradient's Lipschitz
-    constant ``2 (1 + alpha + beta)`` (the paper's bound in 4.1 is four times larger;
-    ``docs/methods/sparse.md``, "Deviations"). ``R`` is the reconstruction of the coded
-    patches (linear average or graph cuts). ``reference`` is a fixed ``u_ref`` or a
-    projection ``u -> u_ref`` (:class:`SpectrumProjector`), re-evaluated at every step like
-    the histogram projection; both are minima of paraboloids, so the step stays a descent.
+    ``eta = 1 / (2 (1 + alpha + beta))``. ``R`` is the reconstruction of the coded patches
+    (linear average or graph cuts). ``reference`` is a fixed ``u_ref`` or a projection
+    ``u -> u_ref`` (:class:`SpectrumProjector`), re-evaluated at every step like the
+    histogram projection ``T_hist``.
+
+    What this guarantees, and what it does not (``docs/methods/sparse.md``, "Step size"):
+    ``T_hist`` and the spectrum projection are projections onto non-convex sets (the images
+    with the exemplar's histogram, with its Fourier modulus); they jump, so the energy's
+    gradient is not Lipschitz and no gradient-descent rate or convergence holds. ``eta`` is
+    the inverse of the Lipschitz constant ``2 (1 + alpha + beta)`` of the quadratic obtained
+    by freezing both projections at the current ``u`` (the low-pass weights are at most 1).
+    As both are exact nearest points, that quadratic lies above the energy and touches it at
+    ``u``, so a step does not raise the energy (6) of fixed codes with the linear
+    reconstruction (``tests/test_sparse.py``). With graph cuts, ``R`` is not the linear
+    data term's target, and across outer iterations the greedy pursuit and the cuts change
+    the codes: the caller's energy (3) is only monitored (:func:`image_energy`), and its
+    decrease is observed, not guaranteed (it jitters by 0.1-2 %). Alternating these
+    projections is a heuristic, as in the paper.
     """
     eta = 1.0 / (2.0 * (1.0 + alpha + beta))
     for _ in range(n_steps):
