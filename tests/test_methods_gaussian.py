@@ -74,9 +74,9 @@ def test_clg_keeps_overlaps_and_rclg_moves_them_by_about_theta(monkeypatch):
         def sample(self, rng):
             return self.inner.sample(rng)
 
-        def conditional(self, known, values, sigma, rng, **kwargs):
+        def posterior(self, known, values, sigma, rng, **kwargs):
             records.append(values.copy())
-            return self.inner.conditional(known, values, sigma, rng)
+            return self.inner.posterior(known, values, sigma, rng, **kwargs)
 
     monkeypatch.setattr(module, "local_gaussian", lambda x: Spy(original(x)))
     # CLG: the conditioning values are the synthesised overlap, which is then left unchanged

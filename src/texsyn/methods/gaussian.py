@@ -150,7 +150,7 @@ class _LocalGaussianBase(TextureSynthesizer):
             reporter=Reporter(callback, "patches"),
         )
         if self.histogram == "match":
-            out = match_exemplar_marginals(out, self.exemplar_)
+            out = match_exemplar_marginals(out, self.exemplar_, patch_size=self.patch_size)
         return out, None
 
 

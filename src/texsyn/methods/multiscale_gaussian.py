@@ -7,13 +7,16 @@ Algorithm 3 of the paper, as :class:`MSLG` runs it:
    build the search of the joint distance of eq. (14) (:class:`~texsyn.models.gaussian.PatchSource`);
 2. ``sample``: the coarse-to-fine walk (:func:`texsyn.drivers.coarse_to_fine.coarse_to_fine`)
 
-   - coarsest scale (line 3): LG with half-patch overlaps averaged (Algorithm 2 with the
-     average of eq. 15, :func:`texsyn.methods.single_scale_gaussian.single_scale`);
+   - coarsest scale (line 3): LG with half-patch overlaps joined by a boundary cut
+     (``coarse_seam='quilt'``) or averaged as eq. 15 does (``'average'``), with
+     :func:`texsyn.methods.single_scale_gaussian.single_scale`; with ``histogram='match'``
+     it then gets the coarsest exemplar scale's histogram;
    - each finer scale (:meth:`MSLG._fine_scale`, lines 5-17): zoom the coarser result in
      (eq. 12) and keep it as the low frequencies; in raster order, sample the high
      frequencies of each patch from the local Gaussian of the ``m`` exemplar patches
      nearest for eq. (14) (overlap term plus low-resolution term);
-3. optionally, a short Portilla–Simoncelli synthesis started from the result (section 5,
+3. with ``histogram='match'``, the exemplar's histogram per channel;
+4. optionally, a short Portilla–Simoncelli synthesis started from the result (section 5,
    Fig. 8).
 
 See ``docs/methods/local_gaussian.md``.
@@ -57,7 +60,8 @@ class MSLG(TextureSynthesizer):
     """Multiscale locally Gaussian (MSLG) synthesis (Raad et al. 2016, Algorithm 3).
 
     The exemplar is zoomed out ``n_scales - 1`` times (Gaussian blur 1.4, sub-sampling by
-    2). The coarsest scale is synthesised by LG with half-patch overlaps averaged (eq. 15);
+    2). The coarsest scale is synthesised by LG with half-patch overlaps (joined as
+    ``coarse_seam`` says);
     each finer scale zooms the previous result in (Fourier zero-padding, eq. 12) and keeps
     it as the low frequencies of every patch, sampling only the high frequencies from the
     local Gaussian of the ``m`` exemplar patches nearest for the joint distance of eq. (14)
@@ -71,7 +75,7 @@ class MSLG(TextureSynthesizer):
     n_neighbors : int
         Number ``m`` of nearest exemplar patches per Gaussian.
     n_scales : int
-        Number of scales ``K`` (1 is LG with overlap averaging).
+        Number of scales ``K`` (1 is LG with half-patch overlaps joined by ``coarse_seam``).
     mode : str
         ``'sample'`` or ``'mean'``.
     seed_patch : str
@@ -84,8 +88,10 @@ class MSLG(TextureSynthesizer):
         (eq. 15, the paper's; averaging two draws in every overlap removes up to half of the
         coarse scale's variance: ``docs/methods/local_gaussian.md``, "Deviations").
     histogram : str
-        ``'match'`` gives the output the exemplar's histogram per channel at the end
-        (``docs/methods/local_gaussian.md``, "Marginals"), before ``post``; ``'none'`` skips it.
+        ``'match'`` gives the coarsest scale the histogram of the coarsest exemplar scale
+        (it is zoomed in as the low frequencies of the next), and the output the exemplar's
+        histogram per channel at the end (``docs/methods/local_gaussian.md``, "Marginals"),
+        before ``post``; ``'none'`` skips both.
     post : str
         ``'portilla_simoncelli'`` uses the MSLG result as the initial image of a short
         Portilla-Simoncelli synthesis (Raad et al. 2016, section 5, Fig. 8); ``'none'`` skips it.
@@ -223,7 +229,7 @@ class MSLG(TextureSynthesizer):
         def scale(level: int, coarser: np.ndarray | None) -> np.ndarray:
             reporter = Reporter(callback, f"scale {n_scales - level}/{n_scales}")
             if coarser is None:  # the coarsest scale: LG, patches joined by `coarse_seam`
-                return single_scale(
+                coarse = single_scale(
                     self.scales_[-1],
                     self.coarse_source_,
                     (canvas_h // big, canvas_w // big),
@@ -238,12 +244,15 @@ class MSLG(TextureSynthesizer):
                     rng=rng,
                     reporter=reporter,
                 )
+                if self.histogram == "match":  # the coarse scale's contrast, before it is zoomed in
+                    coarse = match_exemplar_marginals(coarse, self.scales_[-1])
+                return coarse
             low = zoom_in(coarser, boundary=self.zoom_boundary)
             return self._fine_scale(low, self.fine_sources_[level], m, rng, reporter)
 
         out = crop_to_output(coarse_to_fine(scale, n_scales)[0], shape)
         if self.histogram == "match":
-            out = match_exemplar_marginals(out, self.exemplar_)
+            out = match_exemplar_marginals(out, self.exemplar_, patch_size=self.patch_size)
         if self.post_ is not None:
             report = Reporter(callback, "portilla_simoncelli")
             out = self.post_.refine(np.clip(out, 0.0, 1.0), callback=report.relabel(report.stage))

@@ -27,6 +27,7 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+from scipy.ndimage import distance_transform_edt
 
 from ..drivers.raster import Block, block_canvas, block_positions, fill_blocks
 from ..errors import InputError
@@ -206,15 +207,37 @@ def conditional_patch(
     given = old.ravel()[entries]
     if theta is not None and mode == "sample":
         given = given + theta * rng.standard_normal(given.size)
+    draw_all = gauss.posterior(entries, given, sigma, None if mode == "mean" else rng, looseness=looseness)
     flat = np.empty(old.size)
     flat[entries] = given
-    flat[~entries] = gauss.conditional(
-        entries, given, sigma, None if mode == "mean" else rng, looseness=looseness
-    )
-    return flat.reshape(old.shape)
+    flat[~entries] = draw_all[~entries]
+    patch = flat.reshape(old.shape)
+    if looseness > 0 and mask.any() and not mask.all():
+        # loose conditioning: the draw explains the overlap only up to its noise, so the
+        # overlap's residual is carried into the free pixels, fading with the distance
+        residual = np.zeros(old.size)
+        residual[entries] = given - draw_all[entries]
+        patch = patch + continue_residual(residual.reshape(old.shape), mask, FADE * old.shape[0])
+    return patch
 
 
-def match_exemplar_marginals(image: np.ndarray, exemplar: np.ndarray) -> np.ndarray:
+#: how far the overlap's residual reaches into the free pixels, as a share of the patch side
+FADE = 0.1
+
+
+def continue_residual(residual: np.ndarray, known: np.ndarray, length: float) -> np.ndarray:
+    """Extend ``residual`` ``(n, n, C)`` from the ``known`` pixels into the others.
+
+    Each free pixel takes the residual of its nearest known pixel times ``exp(-d / length)``,
+    ``d`` the distance in pixels between them; known pixels get 0 (their values are kept).
+    ``docs/methods/local_gaussian.md``, "Conditioning".
+    """
+    distance, (rows, cols) = distance_transform_edt(~known, return_indices=True)
+    fade = np.where(known, 0.0, np.exp(-distance / max(length, 1e-9)))
+    return residual[rows, cols] * fade[..., None]
+
+
+def match_exemplar_marginals(image: np.ndarray, exemplar: np.ndarray, *, patch_size: int = 1) -> np.ndarray:
     """Give every channel of ``image`` ``(H, W, C)`` the histogram of the exemplar's channel.
 
     The LG family's optional last step (``histogram='match'``; not in Raad et al. 2016,
@@ -222,9 +245,17 @@ def match_exemplar_marginals(image: np.ndarray, exemplar: np.ndarray) -> np.ndar
     (LG's bright specks) and blends of ``m`` neighbours lose part of the contrast; exact
     matching (:func:`texsyn.ops.histogram.match_histogram`, ties by position) keeps every
     value inside the exemplar's range and restores its marginals.
+
+    An output with fewer pixels than one ``patch_size x patch_size`` patch is not a sample of
+    the exemplar's histogram (a 13x9 crop of a texture spans a fraction of its range):
+    matching would stretch it to the whole range, so it is only clipped to the exemplar's
+    per-channel range.
     """
     x = np.asarray(image, dtype=np.float64)
     ex = as_channels(np.asarray(exemplar, dtype=np.float64))
+    if x.shape[0] * x.shape[1] < patch_size * patch_size:
+        lo, hi = ex.min(axis=(0, 1)), ex.max(axis=(0, 1))
+        return np.clip(x, lo, hi)
     return np.stack([match_histogram(x[..., c], ex[..., c]) for c in range(x.shape[2])], axis=-1)
 
 

@@ -107,22 +107,45 @@ class LocalGaussian:
         ----------
         Raad, Desolneux, Morel (2016), section 3.1, eqs. (4)-(6).
         """
+        return self.posterior(known, values, sigma, rng, looseness=looseness)[~known]
+
+    def posterior(
+        self,
+        known: np.ndarray,
+        values: np.ndarray,
+        sigma: float,
+        rng: np.random.Generator | None,
+        *,
+        looseness: float = 0.0,
+    ) -> np.ndarray:
+        """:meth:`conditional` for every entry: the known ones too, as the model explains them.
+
+        With ``looseness > 0`` the known values are noisy observations, so the posterior's
+        known entries differ from ``values``; :func:`texsyn.methods.single_scale_gaussian.conditional_patch`
+        carries that difference into the free entries near the overlap. Same draws as
+        :meth:`conditional` (``z1`` for every entry, then ``z2``).
+
+        Returns
+        -------
+        ndarray, shape (D,)
+        """
         f_known = self.factor[known]
-        f_free = self.factor[~known]
+        f_all = self.factor
         m = self.factor.shape[1]
         gram = f_known.T @ f_known
         noise = max(float(sigma) ** 2, float(looseness) * float(np.trace(gram)) / m)
         gram[np.diag_indices(m)] += noise
         chol = linalg.cho_factor(gram, lower=True)
         beta = linalg.cho_solve(chol, f_known.T @ (values - self.mean[known]))
-        mean = self.mean[~known] + f_free @ beta
+        mean = self.mean + f_all @ beta
         if rng is None:
             return mean
-        z1 = rng.standard_normal(f_free.shape[0])
+        z1 = np.zeros(f_all.shape[0])
+        z1[~known] = rng.standard_normal(int(np.count_nonzero(~known)))
         z2 = rng.standard_normal(m)
         # C^{-T} z2 solves C^T x = z2 with C lower triangular
         x = linalg.solve_triangular(chol[0], z2, lower=True, trans="T")
-        return mean + sigma * z1 + np.sqrt(noise) * (f_free @ x)
+        return mean + sigma * z1 + np.sqrt(noise) * (f_all @ x)
 
 
 def local_gaussian(samples: np.ndarray) -> LocalGaussian:
