@@ -131,7 +131,10 @@ ADDED_PARAMS: dict[str, dict[str, AddedParam]] = {
     "sparse": {
         "spectrum_weight": AddedParam(
             "0.2.0", DEFAULT, "used only with lowpass_ref='spectrum', which older files do not hold"
-        )
+        ),
+        "final_rounds": AddedParam(
+            "0.2.0", DEFAULT, "used only with lowpass_ref='spectrum', which older files do not hold"
+        ),
     },
     "grouplets": {
         name: AddedParam("0.2.0", DEFAULT, "0.2.0's grouplet model and animation are gone (CHANGELOG)")

@@ -401,6 +401,25 @@ def box_power(shape: tuple[int, int], tau: int) -> np.ndarray:
     return np.abs(np.fft.rfft2(box)) ** 2
 
 
+def lowpass_towards(u: np.ndarray, target: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """``u`` with its spectrum moved toward ``target``'s by ``weight`` per frequency.
+
+    ``F^{-1}[u^ + weight (target^ - u^)]``: weight 1 takes ``target``'s coefficient, 0 keeps
+    ``u``'s. With the box filter's modulus ``|h^|`` as weight and a spectrum projection as
+    target, it sets the large-scale energy without touching the fine scales
+    (``docs/methods/sparse.md``, "Final rounds").
+
+    Parameters
+    ----------
+    u, target : ndarray, shape (H, W, C)
+    weight : ndarray, shape (H, W // 2 + 1)
+        Per-frequency weight in [0, 1] on the real-FFT grid.
+    """
+    spec = np.fft.rfft2(u, axes=(0, 1))
+    spec += weight[..., None] * (np.fft.rfft2(target, axes=(0, 1)) - spec)
+    return np.fft.irfft2(spec, s=u.shape[:2], axes=(0, 1))
+
+
 class SpectrumProjector:
     """Projection on the images whose Fourier transform is the exemplar's up to a phase.
 
