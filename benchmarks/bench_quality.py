@@ -4,6 +4,7 @@ Usage::
 
     python benchmarks/bench_quality.py [--textures DIR] [--methods NAME ...] [--limit N]
                                        [--grey] [--details FILE] [--sheets DIR]
+                                       [--store DIR [--only NAME ...]]
                                        [--sizes 128 256 512 1024] [--budget SECONDS]
                                        [--out benchmarks/quality.md] [--plot benchmarks/time_vs_size.png]
 
@@ -14,7 +15,9 @@ luma); the table gives, per method, the median wall time (fit + sample), the med
 metric of :func:`texsyn.metrics.evaluate` and how many outputs keep both the sharpness and
 the contrast ratio within 0.8-1.2. ``--details`` writes one table per method with every
 exemplar's figures; ``--sheets`` writes one contact sheet per exemplar (the exemplar, then
-each method's output, in the order of ``--methods``).
+each method's output, in the order of ``--methods``; none for the luma runs). ``--store DIR`` keeps every output
+and its scores; a later run with ``--only NAME ...`` runs only those methods again and reads
+the others back (a method changed, the rest not).
 
 The second part times each method on one 128x128 colour exemplar for output sides of
 ``--sizes`` and plots time against size (log-log, needs matplotlib: ``pip install
@@ -24,6 +27,7 @@ The second part times each method on one 128x128 colour exemplar for output side
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import platform
 import statistics
@@ -84,24 +88,66 @@ def contact_sheet(exemplar: np.ndarray, outputs: list[np.ndarray]) -> np.ndarray
     return np.concatenate([p[:side] for p in padded], axis=1)
 
 
-def quality_table(textures, methods, details=None, sheets=None) -> tuple[list[str], dict]:
+def stem_of(label: str) -> str:
+    """File-name stem of a texture label ('dir/name.png (grey)' -> 'dir_name_grey')."""
+    grey = label.endswith(" (grey)")
+    return label.removesuffix(" (grey)").rsplit(".", 1)[0].replace("/", "_") + ("_grey" if grey else "")
+
+
+class Store:
+    """Outputs and scores kept between runs (``--store``): a method left out of ``--only``
+    is read back instead of run again, so one method can be rerun after a change."""
+
+    def __init__(self, folder: Path | None):
+        self.folder = folder
+        self.index: dict = {}
+        if folder is not None:
+            folder.mkdir(parents=True, exist_ok=True)
+            path = folder / "scores.json"
+            self.index = json.loads(path.read_text()) if path.exists() else {}
+
+    def get(self, label: str, name: str):
+        entry = self.index.get(f"{label}|{name}")
+        if entry is None or self.folder is None:
+            return None
+        return read_image(self.folder / entry["file"]), entry["seconds"], entry["scores"]
+
+    def put(self, label: str, name: str, out: np.ndarray, seconds: float, scores: dict) -> None:
+        if self.folder is None:
+            return
+        file = f"{stem_of(label)}__{name}.png"
+        write_image(self.folder / file, np.clip(out, 0.0, 1.0), overwrite=True)
+        self.index[f"{label}|{name}"] = {"file": file, "seconds": seconds, "scores": scores}
+        (self.folder / "scores.json").write_text(json.dumps(self.index, indent=0, sort_keys=True))
+
+
+def quality_table(
+    textures, methods, details=None, sheets=None, store=None, only=None, sheet_ext="png"
+) -> tuple[list[str], dict]:
     per_method: dict[str, dict[str, list[float]]] = {m: {"seconds": []} for m in methods}
     failures: dict[str, list[str]] = {m: [] for m in methods}
     rows: dict[str, list[str]] = {m: [] for m in methods}
     keys = list(METRIC_DESCRIPTIONS)
+    store = store or Store(None)
     for label, ex in textures:
         outputs = []
         for name in methods:
-            try:
-                start = time.perf_counter()
-                out = texsyn.make_method(name).fit(ex).sample(rng=0)
-                seconds = time.perf_counter() - start
-            except ValueError as exc:  # e.g. exemplar smaller than the method's patch
-                failures[name].append(f"{label}: {exc}")
-                outputs.append(np.ones((2 * ex.shape[0], 2 * ex.shape[1]) + ex.shape[2:], np.float32))
-                continue
-            outputs.append(out)
-            scores = evaluate(out, ex)
+            kept = None if only is None or name in only else store.get(label, name)
+            if kept is not None:
+                out, seconds, scores = kept
+                outputs.append(out)
+            else:
+                try:
+                    start = time.perf_counter()
+                    out = texsyn.make_method(name).fit(ex).sample(rng=0)
+                    seconds = time.perf_counter() - start
+                except ValueError as exc:  # e.g. exemplar smaller than the method's patch
+                    failures[name].append(f"{label}: {exc}")
+                    outputs.append(np.ones((2 * ex.shape[0], 2 * ex.shape[1]) + ex.shape[2:], np.float32))
+                    continue
+                outputs.append(out)
+                scores = {k: float(v) for k, v in evaluate(out, ex).items()}
+                store.put(label, name, out, seconds, scores)
             per_method[name]["seconds"].append(seconds)
             per_method[name].setdefault("within", []).append(float(within(scores)))
             for key, value in scores.items():
@@ -109,13 +155,11 @@ def quality_table(textures, methods, details=None, sheets=None) -> tuple[list[st
             rows[name].append(
                 f"| {label} | {seconds:.2f} | " + " | ".join(f"{scores[k]:.4g}" for k in keys) + " |"
             )
-        if sheets is not None:
+        if sheets is not None and not label.endswith(" (grey)"):  # the luma runs get no sheet
             sheets.mkdir(parents=True, exist_ok=True)
-            grey = label.endswith(" (grey)")
-            stem = label.removesuffix(" (grey)").rsplit(".", 1)[0].replace("/", "_") + (
-                "_grey" if grey else ""
+            write_image(
+                sheets / f"sheet_{stem_of(label)}.{sheet_ext}", contact_sheet(ex, outputs), overwrite=True
             )
-            write_image(sheets / f"sheet_{stem}.png", contact_sheet(ex, outputs))
             print(
                 f"{label:40s} {name:15s} {seconds:8.3f} s  coherence {scores['patch_coherence']:.4f}  copied {scores['copied_share']:.3f}",
                 flush=True,
@@ -201,6 +245,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--grey", action="store_true", help="also run colour exemplars as their luma")
     parser.add_argument("--details", type=Path, default=None, help="one table per method, every exemplar")
     parser.add_argument("--sheets", type=Path, default=None, help="a contact sheet per exemplar here")
+    parser.add_argument(
+        "--store",
+        type=Path,
+        default=None,
+        help="keep outputs and scores here; reuse them for methods not in --only",
+    )
+    parser.add_argument("--only", nargs="*", default=None, help="with --store: run only these methods again")
+    parser.add_argument(
+        "--sheet-ext", default="png", choices=("png", "jpg"), help="file type of the contact sheets"
+    )
     parser.add_argument("--out", type=Path, default=REPO / "benchmarks" / "quality.md")
     parser.add_argument("--plot", type=Path, default=REPO / "benchmarks" / "time_vs_size.png")
     args = parser.parse_args(argv)
@@ -208,7 +262,9 @@ def main(argv: list[str] | None = None) -> int:
     textures = load_textures(args.textures, args.limit)
     if args.grey:
         textures = with_grey(textures)
-    table, _ = quality_table(textures, args.methods, args.details, args.sheets)
+    table, _ = quality_table(
+        textures, args.methods, args.details, args.sheets, Store(args.store), args.only, args.sheet_ext
+    )
     lines = [
         "# texsyn methods over a texture folder",
         "",
