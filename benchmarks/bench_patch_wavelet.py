@@ -3,6 +3,7 @@
 Usage::
 
     python benchmarks/bench_patch_wavelet.py [--textures DIR] [--out benchmarks/patch_wavelet.md]
+    python benchmarks/bench_patch_wavelet.py --part ratio   # only the last section, rewritten in place
 
 Measures (medians, this machine):
 
@@ -12,10 +13,15 @@ Measures (medians, this machine):
 * the ratio sequence 0 / 0.1 / 0.5 / 1 of each pair (paper Figs. 7-8): fraction of pixels
   that keep their ratio-0 coordinate, share of kept details, and the images;
 * the coarse-to-fine progression of a synthesis (Fig. 4), sigma profiles (Fig. 6) and a
-  2x2 tiling of a pure synthesis (Fig. 5, periodicity).
+  2x2 tiling of a pure synthesis (Fig. 5, periodicity);
+* the modification along the ratio 0, 0.1, ..., 1 (issue 19) of Sand-01 toward Brick-00 and
+  back, with the paper's per-coefficient thresholding (texsyn 0.2's ``modify``, kept as
+  ``thresholding='coefficient'``) and the local thresholding that replaced it: distances to
+  both textures, mean gradient, bed-joint share, and one contact sheet per pair.
 
 Images go to ``benchmarks/results/`` (not committed: they are made of the exemplars'
-pixels); the markdown table lists their file names.
+pixels), except the contact sheets ``patch_wavelet_modify_strip_*.png`` (``.gitignore``); the
+markdown table lists their file names.
 """
 
 from __future__ import annotations
@@ -43,6 +49,13 @@ PAIRS = [
     ("gh_quilting/t2.png", "gh_tartavel_vistex/Brick-00.png"),
 ]
 RATIOS = (0.0, 0.1, 0.5, 1.0)
+#: (input texture, exemplar) pairs of the modification along the ratio (128x128 crops)
+RATIO_PAIRS = [
+    ("gh_tartavel_vistex/Sand-01.png", "gh_tartavel_vistex/Brick-00.png"),
+    ("gh_tartavel_vistex/Brick-00.png", "gh_tartavel_vistex/Sand-01.png"),
+]
+PATH = tuple(round(0.1 * i, 1) for i in range(11))
+RATIO_SECTION = "## Modification along the ratio (issue 19)"
 
 
 def square(image: np.ndarray, size: int) -> np.ndarray:
@@ -52,9 +65,101 @@ def square(image: np.ndarray, size: int) -> np.ndarray:
     return np.pad(image, pad, mode="symmetric")[:size, :size]
 
 
+def bed_joint_share(image: np.ndarray) -> float:
+    """Share of the (grey) variance carried by the row means: the bed joints of a wall that
+    cross the whole width make it large, broken joints small."""
+    x = np.asarray(image, dtype=np.float64)
+    x = x.mean(axis=2) if x.ndim == 3 else x
+    return float(np.var(x.mean(axis=1)) / np.var(x))
+
+
+def path_summary(values: np.ndarray) -> str:
+    """Path length (sum of steps over the net change: 1 when monotone) and largest step."""
+    net = abs(values[-1] - values[0])
+    steps = np.abs(np.diff(values))
+    return f"path {steps.sum() / net:.2f}, largest step {steps.max() / net:.2f}"
+
+
+def ratio_section(args) -> list[str]:
+    """Modification along the ratio, per-coefficient (before) and local (after) thresholding."""
+    from texsyn.metrics import mean_gradient, ps_distance
+
+    lines = [
+        RATIO_SECTION,
+        "",
+        "Ratios 0, 0.1, ..., 1, 128x128 crops, colour, equalisation on (the defaults). *Before*:",
+        "the paper's per-coefficient rule, texsyn 0.2's `modify` (`thresholding='coefficient'`,",
+        "byte for byte the old output); *after*: local thresholding (the default). ps: `ps_distance`",
+        "to the exemplar and to the input; grad: `mean_gradient`; beds: share of the variance",
+        "carried by the row means (continuous bed joints); kept: share of pixels keeping their",
+        "ratio-0 exemplar position. Path: sum of the steps over the net change (1 = monotone);",
+        "largest step: over the net change (0.1 for an even transition).",
+        "",
+    ]
+    for input_name, exemplar_name in RATIO_PAIRS:
+        texture = square(read_image(args.textures / input_name), 128)
+        ex = read_image(args.textures / exemplar_name)[:128, :128]
+        a, b = Path(input_name).stem, Path(exemplar_name).stem
+        method = texsyn.make_method("patch_wavelet").fit(ex)
+        runs, rows = {}, {}
+        for label, thresholding in (("before", "coefficient"), ("after", "local")):
+            t0 = time.perf_counter()
+            results = method.modify(texture, list(PATH), thresholding=thresholding)
+            seconds = time.perf_counter() - t0
+            base = results[0].source_map
+            stats = np.array(
+                [
+                    (
+                        ps_distance(r.image, ex),
+                        ps_distance(r.image, texture),
+                        mean_gradient(r.image),
+                        bed_joint_share(r.image),
+                        np.mean(np.all(r.source_map == base, axis=-1)),
+                    )
+                    for r in results
+                ]
+            )
+            runs[label] = results
+            rows[label] = (stats, seconds)
+        strip = np.concatenate(
+            [np.concatenate([r.image for r in runs[label]], axis=1) for label in ("before", "after")], axis=0
+        )
+        sheet = f"patch_wavelet_modify_strip_{a}_{b}.png"
+        write_image(args.images / sheet, strip)
+        lines += [
+            f"### {a} (input) toward {b} (exemplar)",
+            "",
+            f"![{a} toward {b}, ratios 0 to 1; top: before, bottom: after](results/{sheet})",
+            "",
+            "| ratio | ps exemplar (before / after) | ps input | grad | beds | kept |",
+            "|---:|---:|---:|---:|---:|---:|",
+        ]
+        before, after = rows["before"][0], rows["after"][0]
+        for i, ratio in enumerate(PATH):
+            cells = [f"{before[i, k]:.3f} / {after[i, k]:.3f}" for k in range(5)]
+            lines.append(f"| {ratio:g} | " + " | ".join(cells) + " |")
+        lines += [
+            "",
+            f"ps to the exemplar: before {path_summary(before[:, 0])}; after {path_summary(after[:, 0])}.",
+            f"ps to the input: before {path_summary(before[:, 1])}; after {path_summary(after[:, 1])}.",
+            f"Time for the 11 ratios (one analysis): before {rows['before'][1]:.1f} s, after {rows['after'][1]:.1f} s.",
+            "",
+        ]
+        print("\n".join(lines[-14:]), flush=True)
+    return lines
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = parser(__doc__.splitlines()[0], "patch_wavelet.md", repeats=3).parse_args(argv)
+    cli = parser(__doc__.splitlines()[0], "patch_wavelet.md", repeats=3)
+    cli.add_argument("--part", choices=["all", "ratio"], default="all", help="'ratio': only the last section")
+    args = cli.parse_args(argv)
     args.images.mkdir(parents=True, exist_ok=True)
+    if args.part == "ratio":
+        text = args.out.read_text() if args.out.exists() else ""
+        head = text.split(RATIO_SECTION)[0].rstrip("\n")
+        args.out.write_text(head + "\n\n" + "\n".join(ratio_section(args)) + "\n")
+        print(f"wrote {args.out}")
+        return 0
     lines = [
         "# Patch-valued wavelet transform (Peyré 2007)",
         "",
@@ -163,6 +268,7 @@ def main(argv: list[str] | None = None) -> int:
             lines.append(f"| {r.ratio:g} | {frac:.3f} | {kept:.3f} | {img} | {mag} |")
             print(lines[-1], flush=True)
         lines.append("")
+    lines += ratio_section(args)
     args.out.write_text("\n".join(lines) + "\n")
     print(f"wrote {args.out}")
     return 0

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from scipy import ndimage
 
 import texsyn
 from strength_utils import coherent_fraction
@@ -170,6 +171,77 @@ def test_thresholding_removes_small_details_only(transform, gravel_features):
         coefficients.thresholded(1.5)
 
 
+def test_detail_positions_name_the_odd_samples(transform, gravel_features):
+    """Table 1: the details of (level, axis) are measured at the odd samples of that split."""
+    coefficients = transform.forward(gravel_features)
+    for (level, axis), odd in coefficients.features.items():
+        rows, cols = coefficients.detail_positions(level, axis)
+        np.testing.assert_array_equal(odd, gravel_features[np.ix_(rows, cols)])
+    every = np.zeros((32, 32), dtype=int)
+    every[0, 0] = 1  # the coarse feature
+    for level, axis in coefficients.details:
+        every[np.ix_(*coefficients.detail_positions(level, axis))] += 1
+    assert np.all(every == 1)  # each sample of the map is measured once
+
+
+def test_detail_energy_adds_every_squared_magnitude_over_its_cell(transform, gravel_features):
+    coefficients = transform.forward(gravel_features)
+    energy = coefficients.detail_energy()
+    assert energy.shape == (32, 32)
+    np.testing.assert_allclose(
+        energy.sum(),
+        sum(
+            (n**2).sum() * (2 ** (2 * j - 1) if a == 0 else 4**j)
+            for (j, a), n in coefficients.norms().items()
+        ),
+    )
+    normalised = coefficients.detail_energy(per_level=True)
+    assert normalised.max() <= 2 * coefficients.top_level + 1e-9  # each level and axis adds at most 1
+
+
+def test_kept_regions_are_nested_and_as_large_as_asked(transform, gravel_features):
+    coefficients = transform.forward(gravel_features)
+    ratios = np.linspace(0, 1, 9)
+    regions = [coefficients.kept_region(r) for r in ratios]
+    assert regions[0].all() and not regions[-1].any()
+    np.testing.assert_allclose([1 - r.mean() for r in regions], ratios)
+    for a, b in zip(regions, regions[1:]):
+        assert np.all(b <= a)
+    # the region follows the smoothed local energy: it keeps where the input deviates most
+    smooth = ndimage.gaussian_filter(coefficients.detail_energy(), 4.0, mode="reflect")
+    half = regions[4]
+    assert smooth[half].min() >= smooth[~half].max()
+    with pytest.raises(ValueError, match="ratio"):
+        coefficients.kept_region(1.2)
+
+
+def test_restoring_inverse_rebuilds_the_kept_region_and_synthesises_the_rest(transform, gravel_features):
+    coefficients = transform.forward(gravel_features)
+    # everything kept: the analysed map exactly (the literal inverse only up to gamma's injectivity)
+    np.testing.assert_array_equal(transform.inverse(coefficients, restore=True), gravel_features)
+    region = coefficients.kept_region(0.5)
+    kept = coefficients.restricted(region)
+    same = coefficients.locally_thresholded(0.5)
+    for key in kept.details:
+        np.testing.assert_array_equal(same.details[key], kept.details[key])
+        np.testing.assert_array_equal(same.features[key], kept.features[key])
+    rebuilt = transform.inverse(kept, restore=True)
+    np.testing.assert_array_equal(rebuilt[region], gravel_features[region])
+    assert np.mean(np.all(rebuilt[~region] == gravel_features[~region], axis=-1)) < 0.5
+    # details outside the region are gone, inside they are untouched
+    for key, d in coefficients.details.items():
+        inside = region[np.ix_(*coefficients.detail_positions(*key))]
+        np.testing.assert_array_equal(kept.details[key][inside], d[inside])
+        assert not kept.details[key][~inside].any() and np.all(kept.features[key][~inside] == -1)
+    # nothing kept: the pure synthesis of the paper's rule at ratio 1
+    nothing = coefficients.restricted(np.zeros((32, 32), dtype=bool))
+    np.testing.assert_array_equal(
+        transform.inverse(nothing, restore=True), transform.inverse(coefficients.thresholded(1.0))
+    )
+    with pytest.raises(ValueError, match="shape"):
+        coefficients.restricted(region[:16])
+
+
 # ---------------------------------------------------------------------- synthesis
 @pytest.mark.method("patch_wavelet")
 def test_pure_synthesis_copies_coherent_regions_and_reports_every_level(brick):
@@ -242,6 +314,22 @@ def test_ratio_zero_rebuilds_the_input_and_ratio_one_keeps_fewer_coordinates(fit
         assert results[0].magnitudes.max() > 0
     mean = np.mean(fractions, axis=0)
     assert mean[3] <= mean[2] <= mean[0]
+
+
+def test_modify_thresholding_local_and_coefficient(fitted):
+    """Local thresholding (default) reports its kept region; the paper's per-coefficient rule
+    is still there and keeps its old results (``docs/methods/patch_wavelet.md``)."""
+    texture = texsyn.data.exemplar("gravel", size=32)
+    local = fitted.modify(texture, [0.0, 0.5, 1.0], equalize=False)
+    paper = fitted.modify(texture, [0.0, 0.5, 1.0], equalize=False, thresholding="coefficient")
+    assert [m.kept.mean() for m in local] == [1.0, 0.5, 0.0]
+    assert all(m.kept is None for m in paper)
+    np.testing.assert_array_equal(local[0].source_map, local[0].feature_map)
+    np.testing.assert_array_equal(local[2].source_map, paper[2].source_map)  # both: pure synthesis
+    # the kept half is the input's own features
+    np.testing.assert_array_equal(local[1].source_map[local[1].kept], local[1].feature_map[local[1].kept])
+    with pytest.raises(ValueError, match="thresholding"):
+        fitted.modify(texture, 0.5, thresholding="soft")
 
 
 def test_ratio_one_depends_on_the_input_only_through_the_coarse_feature(fitted, brick):

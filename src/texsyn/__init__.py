@@ -92,28 +92,34 @@ def modify(
     equalize: bool = True,
     grid_boundary: str = "symmetric",
     per_level: bool = False,
+    thresholding: str = "local",
     callback=None,
     **params,
 ) -> np.ndarray:
     """Modify a texture toward an exemplar with the patch-valued wavelet transform (Peyré 2007, 5.2).
 
-    ``texture`` is analysed with the exemplar's patches, its wavelet details of magnitude at
-    most ``ratio`` times the largest are removed and the transform is inverted: ``ratio = 0``
-    rebuilds the texture from exemplar pixels, ``ratio = 1`` is a pure synthesis of the
-    exemplar, values in between interpolate between the two textures.
+    ``texture`` is analysed with the exemplar's patches, its wavelet details are removed on
+    the share ``ratio`` of the grid where they carry the least energy and the transform is
+    inverted: ``ratio = 0`` rebuilds the texture from exemplar pixels, ``ratio = 1`` is a pure
+    synthesis of the exemplar, values in between move steadily from one to the other
+    (``docs/methods/patch_wavelet.md``).
 
     Parameters
     ----------
     texture, exemplar : ndarray, shape (H, W) or (H, W, 3)
         Float values in [0, 1] (uint8/uint16 are scaled); any sizes.
     ratio : float
-        Threshold as a fraction of the largest detail magnitude, in [0, 1].
+        In [0, 1]: the share of the grid synthesised (``thresholding='local'``), or the
+        threshold as a fraction of the largest detail magnitude (``'coefficient'``, the
+        paper's literal rule).
     equalize : bool
         Match the exemplar's colour histograms to the texture's first.
     grid_boundary : {'symmetric', 'periodic'}
         Border rule of the transform ('periodic' for a texture that tiles).
     per_level : bool
         Threshold every level against its own largest detail.
+    thresholding : {'local', 'coefficient'}
+        How details are removed (:meth:`texsyn.methods.PatchWavelet.modify`).
     callback : callable, optional
         Receives :class:`Progress` records.
     **params
@@ -137,7 +143,13 @@ def modify(
     """
     method = make_method("patch_wavelet", **params).fit(exemplar)
     result = method.modify(
-        texture, ratio, equalize=equalize, grid_boundary=grid_boundary, per_level=per_level, callback=callback
+        texture,
+        ratio,
+        equalize=equalize,
+        grid_boundary=grid_boundary,
+        per_level=per_level,
+        thresholding=thresholding,
+        callback=callback,
     )
     return result.image
 

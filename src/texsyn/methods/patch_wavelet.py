@@ -72,7 +72,12 @@ class Modification:
         ``n_h`` and ``n_w`` are the input's height and width, each rounded up to a power of
         two (``n x n`` for a square input).
     ratio : float
-        The threshold as a fraction of the largest detail magnitude.
+        The ratio asked for: the share of the grid whose details are removed (local
+        thresholding), or the threshold as a fraction of the largest detail magnitude
+        (``thresholding='coefficient'``).
+    kept : ndarray of bool, shape (H, W), or None
+        Pixels whose analysed features were kept (local thresholding: these are the input's
+        own features, the others are synthesised); ``None`` with coefficient thresholding.
     """
 
     image: np.ndarray
@@ -80,6 +85,7 @@ class Modification:
     feature_map: np.ndarray
     magnitudes: np.ndarray
     ratio: float
+    kept: np.ndarray | None = None
 
 
 class PatchWavelet(TextureSynthesizer):
@@ -258,16 +264,28 @@ class PatchWavelet(TextureSynthesizer):
         equalize: bool = True,
         grid_boundary: str = "symmetric",
         per_level: bool = False,
+        thresholding: str = "local",
         callback: Callable[[Progress], None] | None = None,
     ) -> Modification | list[Modification]:
         """Modify ``texture`` toward the fitted exemplar (paper section 5.2).
 
         The texture is expressed with the exemplar's features (eq. 4, after equalising the
         exemplar's colours to the texture's, channel by channel), decomposed by the forward
-        transform, the details of magnitude at most ``ratio`` times the largest are set to
-        zero, and the inverse transform rebuilds it. ``ratio = 0`` rebuilds the texture from
-        exemplar pixels, ``ratio = 1`` is a pure synthesis from one coarse feature; values in
-        between interpolate (Figs. 7-8). Each side that is not a power of two is extended
+        transform, its small details are removed and the inverse transform rebuilds it.
+        ``ratio = 0`` rebuilds the texture from exemplar pixels, ``ratio = 1`` is a pure
+        synthesis from one coarse feature; values in between interpolate (Figs. 7-8).
+
+        By default (``thresholding='local'``) the details are removed by regions: the share
+        ``ratio`` of the grid where the local energy of the details is lowest (the input is
+        best predicted by the exemplar's association field there) is synthesised, the rest
+        keeps the input's own features, and the synthesis continues them across the border.
+        The statistics then move steadily with ``ratio`` and the structures of both textures
+        stay whole. ``thresholding='coefficient'`` is the paper's literal rule: every detail
+        of magnitude at most ``ratio`` times the largest is set to zero and the kept ones are
+        applied to the new predictions as ``gamma^-1(gamma(mu) - d)``; since the magnitudes
+        are heavy-tailed nearly every detail is gone by ``ratio = 0.1``, and kept details
+        applied to changed predictions give unrelated patches that break structures
+        (``docs/methods/patch_wavelet.md``, "Deviations"). Each side that is not a power of two is extended
         symmetrically to the next one, on its own, and cropped back: an ``H x W`` input is
         analysed on a ``2^a x 2^b`` grid (``2^a >= H``, ``2^b >= W``), so a long thin input
         costs what its number of pixels says, not what a square of its longer side would
@@ -282,20 +300,30 @@ class PatchWavelet(TextureSynthesizer):
         texture : ndarray, shape (H, W) or (H, W, C)
             Converted to the exemplar's channels (grey is replicated, colour becomes luma).
         ratio : float or sequence of float
-            Threshold(s) as a fraction of the largest detail magnitude, in [0, 1]; a sequence
-            shares one analysis and returns one result per value.
+            In [0, 1]: the share of the grid whose details are removed (local thresholding),
+            or the threshold as a fraction of the largest detail magnitude (coefficient
+            thresholding); a sequence shares one analysis and returns one result per value.
         equalize : bool
             Match the exemplar's colour histograms to the texture's first (Fig. 2).
         grid_boundary : {'symmetric', 'periodic'}
             Neighbour rule at the border of the sample grid ('periodic' for textures that tile).
         per_level : bool
-            Threshold each level against its own largest detail instead of the global one.
+            Measure each level against its own largest detail instead of the global one
+            (local thresholding: each level's magnitudes are divided by their largest before
+            they add up to the local energy).
+        thresholding : {'local', 'coefficient'}
+            Remove details by regions of low local detail energy (the default), or one by one
+            against ``ratio`` times the largest (the paper's literal rule).
         callback : callable, optional
             Receives :class:`Progress` records (stages 'features', 'analysis', 'synthesis').
 
         Returns
         -------
         Modification, or a list of them when ``ratio`` is a sequence.
+
+        References
+        ----------
+        G. Peyré, SSVM 2007, section 5.2 (thresholding, Figs. 7-8), section 4 (Tables 1-2).
         """
         exemplar = self._require_fitted()
         ratios: list[Any] = [ratio] if np.ndim(ratio) == 0 else list(ratio)  # type: ignore[arg-type]
@@ -308,6 +336,8 @@ class PatchWavelet(TextureSynthesizer):
                 raise InputError(f"ratio must be a number in [0, 1], got {r!r}")
         if grid_boundary not in ("symmetric", "periodic"):
             raise InputError(f"grid_boundary must be 'symmetric' or 'periodic', got {grid_boundary!r}")
+        if thresholding not in ("local", "coefficient"):
+            raise InputError(f"thresholding must be 'local' or 'coefficient', got {thresholding!r}")
         size = np.shape(texture) if not isinstance(texture, (str, bytes)) else ()
         if len(size) in (2, 3) and min(size[:2]) >= 1:  # before the texture is even converted
             (h, w), (n_h, n_w) = size[:2], self.modify_grid(size[:2])
@@ -341,11 +371,19 @@ class PatchWavelet(TextureSynthesizer):
             features, grid_boundary=grid_boundary, report=report.stage_of("analysis")
         )
         results = []
+        local = thresholding == "local"
         for r in ratios:
-            kept = coefficients.thresholded(float(r), per_level=per_level)
+            region = None
+            if local:  # regions of low detail energy, smoothed over half the feature window
+                region = coefficients.kept_region(
+                    float(r), per_level=per_level, smoothing=transform.feature_width / 2
+                )
+                kept = coefficients.restricted(region)
+            else:
+                kept = coefficients.thresholded(float(r), per_level=per_level)
             walk = report.stage_of("synthesis", kept.top_level)
             coords = coarse_to_fine(
-                transform.inverse_step(kept), kept.top_level, start=kept.coarse, reporter=walk
+                transform.inverse_step(kept, restore=local), kept.top_level, start=kept.coarse, reporter=walk
             )[0]
             coords = crop_to_output(coords, (h, w))
             results.append(
@@ -355,6 +393,7 @@ class PatchWavelet(TextureSynthesizer):
                     feature_map=crop_to_output(features, (h, w)).astype(np.int32),
                     magnitudes=kept.magnitudes(),
                     ratio=float(r),
+                    kept=None if region is None else crop_to_output(region, (h, w)),
                 )
             )
         return results[0] if np.ndim(ratio) == 0 else results
@@ -498,7 +537,10 @@ class PatchWavelet(TextureSynthesizer):
         transients.append(max(e[1] for e in kept))
         terms["searches and embeddings (largest)"] = max(transients)
         terms["texture, its extension and feature map"] = grid * (40.0 * c + 40.0)
-        terms["wavelet details"] = grid * (self.embedding_dim * 8.0 + 8.0) * (1 + n_ratios)
+        # details, their norms and the analysed features (two int64 per sample), once for the
+        # analysis and once per ratio; the local energy map, its smoothing and its ranking
+        terms["wavelet details"] = grid * (self.embedding_dim * 8.0 + 8.0 + 16.0) * (1 + n_ratios)
+        terms["local detail energy"] = grid * 25.0
         per_result = grid * 8.0 + float(th) * float(tw) * (8.0 * c + 24.0) + output_bytes(c, texture_shape)
         terms["coordinate maps and results"] = 64.0 * grid + n_ratios * per_result
         return terms

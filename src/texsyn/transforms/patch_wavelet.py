@@ -88,12 +88,19 @@ class PatchWaveletCoefficients(Coefficients):
         ``(n_h/2^j, n_w/2^(j-1), p)`` for axis 0 and ``(n_h/2^j, n_w/2^j, p)`` for axis 1.
     grid_boundary : {'periodic', 'symmetric'}
         Boundary rule of the sample grid that produced them (the inverse must use the same).
+    features : dict
+        ``features[(j, axis)]``: int64 arrays ``(rows, cols, 2)``, the exemplar positions of
+        the odd samples the details were measured from, set by :meth:`PatchLifting.forward`
+        (empty for coefficients that analysed nothing, such as a synthesis's); ``-1`` marks a
+        sample whose feature is not to be restored. Read by the inverse only when asked to
+        restore (:meth:`PatchLifting.inverse_step`, modification by local thresholding).
     """
 
     coarse: np.ndarray
     top_level: int
     details: dict = field(default_factory=dict)
     grid_boundary: str = "periodic"
+    features: dict = field(default_factory=dict)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -131,6 +138,94 @@ class PatchWaveletCoefficients(Coefficients):
         """``||d||_2`` of every detail vector, per ``(level, axis)``."""
         return {key: np.linalg.norm(d, axis=-1) for key, d in self.details.items()}
 
+    def detail_positions(self, level: int, axis: int) -> tuple[np.ndarray, np.ndarray]:
+        """Rows and columns, in the full map, of the odd samples of ``(level, axis)``.
+
+        At level ``j`` the samples are ``s = 2^(j-1)`` apart: the vertical pair ``(r, c)``
+        predicts the sample at ``((2r + 1) s, c s)``, the horizontal one that at
+        ``(2r s, (2c + 1) s)`` (Table 1: rows first, then columns).
+        """
+        s = 2 ** (level - 1)
+        rows, cols = self.detail_shape(level, axis)
+        if axis == 0:
+            return (2 * np.arange(rows) + 1) * s, np.arange(cols) * s
+        return 2 * np.arange(rows) * s, (2 * np.arange(cols) + 1) * s
+
+    def detail_energy(self, *, per_level: bool = False) -> np.ndarray:
+        """Local energy of the details: ``sum ||d||^2`` over the cells they cover, ``(n_h, n_w)``.
+
+        A detail of level ``j`` speaks for the ``2s x s`` (vertical pair) or ``2s x 2s``
+        (horizontal pair) cell of the map around its odd sample, ``s = 2^(j-1)``; every
+        level and direction adds the squared magnitude of its details over their cells. With
+        ``per_level=True`` each level's magnitudes are first divided by the level's largest.
+        """
+        out = np.zeros(self.shape)
+        norms = self.norms()
+        for level in range(1, self.top_level + 1):
+            top = max((float(norms[(level, a)].max()) for a in (0, 1) if (level, a) in norms), default=0.0)
+            for axis in (0, 1):
+                if (level, axis) not in norms or top == 0:
+                    continue
+                s = 2 ** (level - 1)
+                n = norms[(level, axis)] / top if per_level else norms[(level, axis)]
+                cell = np.ones((2 * s, s) if axis == 0 else (2 * s, 2 * s))
+                out += np.kron(n**2, cell)
+        return out
+
+    def kept_region(self, ratio: float, *, per_level: bool = False, smoothing: float = 4.0) -> np.ndarray:
+        """Where local thresholding keeps the input: a boolean ``(n_h, n_w)`` map.
+
+        The :meth:`detail_energy` map is smoothed by a Gaussian of ``smoothing`` samples and
+        the share ``ratio`` of the map's samples with the lowest smoothed energy is removed
+        (ties broken by position, C order): ``ratio = 0`` keeps everything, ``ratio = 1``
+        nothing, and the kept regions of larger ratios lie inside those of smaller ones.
+        """
+        if not 0.0 <= ratio <= 1.0:
+            raise ValueError(f"ratio must be in [0, 1], got {ratio!r}")
+        energy = self.detail_energy(per_level=per_level)
+        if smoothing > 0:
+            from scipy.ndimage import gaussian_filter
+
+            energy = gaussian_filter(energy, float(smoothing), mode="reflect")
+        order = np.argsort(energy, axis=None, kind="stable")
+        keep = np.ones(energy.size, dtype=bool)
+        keep[order[: int(round(ratio * energy.size))]] = False
+        return keep.reshape(energy.shape)
+
+    def restricted(self, region: np.ndarray) -> PatchWaveletCoefficients:
+        """The coefficients with the details outside ``region`` removed (section 5.2).
+
+        ``region`` is a boolean map of the map's shape. A detail is kept when its odd sample
+        (:meth:`detail_positions`) lies in the region: its detail and its analysed feature stay,
+        the others become zero and ``-1``.
+        """
+        region = np.asarray(region, dtype=bool)
+        if region.shape != self.shape:
+            raise ValueError(f"region must have the map's shape {self.shape}, got {region.shape}")
+        details, features = {}, {}
+        for (level, axis), d in self.details.items():
+            rows, cols = self.detail_positions(level, axis)
+            keep = region[np.ix_(rows, cols)]
+            details[(level, axis)] = np.where(keep[..., None], d, 0.0)
+            if (level, axis) in self.features:
+                features[(level, axis)] = np.where(keep[..., None], self.features[(level, axis)], -1)
+        return PatchWaveletCoefficients(
+            self.coarse.copy(), self.top_level, details, self.grid_boundary, features
+        )
+
+    def locally_thresholded(
+        self, ratio: float, *, per_level: bool = False, smoothing: float = 4.0
+    ) -> PatchWaveletCoefficients:
+        """Thresholding of the local detail energy: :meth:`restricted` to :meth:`kept_region`.
+
+        Removes the details of the share ``ratio`` of the map where the input deviates least
+        from the exemplar's own predictions, as whole regions rather than scattered samples;
+        invert with ``restore=True`` (:meth:`PatchLifting.inverse_step`). ``ratio = 0``
+        rebuilds the analysed map exactly, ``ratio = 1`` is the pure synthesis of
+        :meth:`thresholded` at 1 (``docs/methods/patch_wavelet.md``, "Deviations").
+        """
+        return self.restricted(self.kept_region(ratio, per_level=per_level, smoothing=smoothing))
+
     def max_norm(self) -> float:
         """Largest detail magnitude over all levels and directions (the ``max d_j`` of Fig. 7)."""
         return max((float(n.max()) for n in self.norms().values() if n.size), default=0.0)
@@ -148,7 +243,7 @@ class PatchWaveletCoefficients(Coefficients):
             raise ValueError(f"ratio must be in [0, 1], got {ratio!r}")
         norms = self.norms()
         global_max = self.max_norm()
-        out = {}
+        out, features = {}, {}
         for (level, axis), d in self.details.items():
             if per_level:
                 top = max(float(norms[(level, a)].max()) for a in (0, 1) if (level, a) in norms)
@@ -156,7 +251,9 @@ class PatchWaveletCoefficients(Coefficients):
                 top = global_max
             keep = norms[(level, axis)] > ratio * top
             out[(level, axis)] = np.where(keep[..., None], d, 0.0)
-        return PatchWaveletCoefficients(self.coarse.copy(), self.top_level, out, self.grid_boundary)
+            if (level, axis) in self.features:
+                features[(level, axis)] = np.where(keep[..., None], self.features[(level, axis)], -1)
+        return PatchWaveletCoefficients(self.coarse.copy(), self.top_level, out, self.grid_boundary, features)
 
     def magnitudes(self) -> np.ndarray:
         """Detail magnitudes packed like an orthogonal wavelet transform (Fig. 7).
@@ -275,7 +372,7 @@ class PatchLifting:
             _deprecated_callback(type(self).__name__, "forward")
         T = self._check_map(coords)
         levels = int(round(math.log2(min(T.shape[:2]))))
-        details = {}
+        details, features = {}, {}
         embeddings: dict[int, tuple[np.ndarray, Any]] = {}  # this call's, never kept
         for level in range(1, levels + 1):
             width = self.width(level)
@@ -286,15 +383,16 @@ class PatchLifting:
                 even, odd = split(T, axis)
                 predicted = self.predict(even, axis, level, grid_boundary)
                 details[(level, axis)] = Y[self.flat_positions(predicted)] - Y[self.flat_positions(odd)]
+                features[(level, axis)] = odd
                 T = even
             if report is not None:
                 report(level, levels)
             if callback is not None:
                 callback(level, levels)
-        return PatchWaveletCoefficients(T.copy(), levels, details, grid_boundary)
+        return PatchWaveletCoefficients(T.copy(), levels, details, grid_boundary, features)
 
     def inverse_step(
-        self, coefficients: PatchWaveletCoefficients
+        self, coefficients: PatchWaveletCoefficients, *, restore: bool = False
     ) -> Callable[[int, np.ndarray | None], np.ndarray]:
         """One level of the backward transform (Table 2), as a coarse-to-fine step.
 
@@ -302,6 +400,13 @@ class PatchLifting:
         ``j = level + 1``) from the map ``T`` of the level above it. Odd samples with an
         exactly zero detail take the prediction itself, so zero details need no embedding;
         others take ``gamma^-1(gamma(prediction) - d)``.
+
+        With ``restore=True`` an odd sample whose analysed feature is known
+        (``coefficients.features``, not ``-1``) takes that feature instead: the same as
+        ``gamma^-1(gamma(prediction) - d)`` where the prediction is the analysis' own (and
+        ``gamma`` injective), and what a modification needs where removing coarser details
+        has changed the prediction, since moving a detail measured at one point of the
+        embedding to another lands on an unrelated patch (``docs/methods/patch_wavelet.md``).
         """
         boundary = coefficients.grid_boundary
         embeddings: dict[int, tuple[np.ndarray, Any]] = {}  # this walk's, never kept
@@ -310,14 +415,29 @@ class PatchLifting:
             j, T = level + 1, np.asarray(coefficients.coarse if coarser is None else coarser, dtype=np.int64)
             width = self.width(j)
             for axis in (1, 0):
-                predicted = self.predict(T, axis, j, boundary)
                 d = coefficients.details.get((j, axis))
-                odd = predicted
-                if d is not None:
-                    if d.shape[:2] != T.shape[:2]:
+                if d is not None and d.shape[:2] != T.shape[:2]:
+                    raise ValueError(
+                        f"details of level {j}, axis {axis} have shape {d.shape[:2]}, expected {T.shape[:2]}"
+                    )
+                known = coefficients.features.get((j, axis)) if restore else None
+                if known is None:
+                    predicted = self.predict(T, axis, j, boundary)
+                    odd = predicted
+                else:
+                    if known.shape[:2] != T.shape[:2]:
                         raise ValueError(
-                            f"details of level {j}, axis {axis} have shape {d.shape[:2]}, expected {T.shape[:2]}"
+                            f"features of level {j}, axis {axis} have shape {known.shape[:2]}, expected {T.shape[:2]}"
                         )
+                    open_ = known[..., 0] < 0  # the samples left to the transform
+                    predicted = np.array(known, dtype=np.int64)
+                    if open_.any():  # predict only those: a small ratio restores nearly all
+                        nxt = next_even(T, axis, boundary)
+                        flat = self.mean_features(T[open_], nxt[open_], axis, 2 ** (j - 1), width)
+                        predicted[open_] = self.positions(flat)
+                    odd = predicted
+                    d = None if d is None else np.where(open_[..., None], d, 0.0)
+                if d is not None:
                     moved = np.any(d != 0, axis=-1)
                     if moved.any():
                         if width not in embeddings:
@@ -335,18 +455,19 @@ class PatchLifting:
         self,
         coefficients: PatchWaveletCoefficients,
         *,
+        restore: bool = False,
         report: Reporter | None = None,
         callback: Callable[[int, int, np.ndarray], None] | None = None,
     ) -> np.ndarray:
         """Backward transform (Table 2): the ``coefficients.shape + (2,)`` coordinate map.
 
-        ``report`` (optional) receives ``(levels_done, levels)`` after each level; the
-        deprecated ``callback`` of round 1 receives ``(levels_done, levels, T)``, ``T`` the
-        coordinate map reached.
+        ``restore`` is that of :meth:`inverse_step`. ``report`` (optional) receives
+        ``(levels_done, levels)`` after each level; the deprecated ``callback`` of round 1
+        receives ``(levels_done, levels, T)``, ``T`` the coordinate map reached.
         """
         if callback is not None:
             _deprecated_callback(type(self).__name__, "inverse")
-        step = self.inverse_step(coefficients)
+        step = self.inverse_step(coefficients, restore=restore)
         T = np.asarray(coefficients.coarse, dtype=np.int64)
         top = coefficients.top_level
         for done, level in enumerate(range(top - 1, -1, -1), start=1):
