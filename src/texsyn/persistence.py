@@ -43,7 +43,6 @@ from __future__ import annotations
 import json
 import os
 import warnings
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -57,6 +56,7 @@ from .io.arrays import COMPRESSION_FLOOR_BYTES, MAX_COMPRESSION_RATIO, NpzArchiv
 from .io.budget import MAX_PIXELS_ENV
 from .io.files import pixel_amount
 from .methods import METHODS, TextureSynthesizer
+from .methods.added_params import ADDED_PARAMS, DEFAULT, AddedParam
 
 __all__ = [
     "ADDED_PARAMS",
@@ -81,66 +81,6 @@ SUFFIX = ".npz"
 MAX_HEADER_CHARS = 1_000_000
 _FITTED = "fitted/"
 _LEGACY_KEYS = ("format_version", "method", "params", "exemplar")
-
-
-class _Default:
-    def __repr__(self) -> str:
-        return "DEFAULT"
-
-
-#: :attr:`AddedParam.old` for a parameter whose current default is what older files get
-DEFAULT = _Default()
-
-
-@dataclass(frozen=True)
-class AddedParam:
-    """A parameter a method gained after model files existed (``docs/persistence.md``).
-
-    Attributes
-    ----------
-    after : str
-        The last texsyn release whose files lack it.
-    old : object
-        The value that gives what a model saved without it did; :data:`DEFAULT` where the
-        current default does (or where nothing can: the note says why).
-    note : str
-        Why that value, for the reader of this table.
-    """
-
-    after: str
-    old: Any
-    note: str = ""
-
-
-_NO_HISTOGRAM = AddedParam("0.2.0", "none", "outputs were the model's draws, not histogram-matched")
-_EXACT = AddedParam("0.2.0", 0.0, "the paper's exact conditioning on the overlap")
-
-#: Parameters added to each method since model files exist (texsyn 0.2.0), with the value that
-#: reproduces a file written before them. :func:`load` fills a parameter missing from a file
-#: with it; where that is not the current default it warns once, naming the parameters. A
-#: test checks that every parameter a method gained since 0.2.0 is listed here.
-ADDED_PARAMS: dict[str, dict[str, AddedParam]] = {
-    "lg": {"histogram": _NO_HISTOGRAM},
-    "clg": {"looseness": _EXACT, "histogram": _NO_HISTOGRAM},
-    "rclg": {"looseness": _EXACT, "histogram": _NO_HISTOGRAM},
-    "mslg": {
-        "coarse_seam": AddedParam("0.2.0", "average", "the coarsest patches were averaged (eq. 15)"),
-        "histogram": _NO_HISTOGRAM,
-    },
-    "portilla_simoncelli": {"record_distance": AddedParam("0.2.0", False, "no diagnostics were returned")},
-    "sparse": {
-        "spectrum_weight": AddedParam(
-            "0.2.0", DEFAULT, "used only with lowpass_ref='spectrum', which older files do not hold"
-        ),
-        "final_rounds": AddedParam(
-            "0.2.0", DEFAULT, "used only with lowpass_ref='spectrum', which older files do not hold"
-        ),
-    },
-    "grouplets": {
-        name: AddedParam("0.2.0", DEFAULT, "0.2.0's grouplet model and animation are gone (CHANGELOG)")
-        for name in ("turbulence", "flow_scale", "spectrum_slope", "advection", "renewal", "layer_iterations")
-    },
-}
 
 
 def _plain(value: Any, where: str) -> Any:
