@@ -112,13 +112,25 @@ def test_level_3_reproduces_words_where_pixel_sampling_grows_fragments():
     assert words > 10 * letters  # measured: about 370 px against 5 px
 
 
-def test_refinement_changes_the_fine_levels_only_locally():
+def test_refinement_keeps_the_coarsest_level_and_changes_the_finer_ones():
+    """``refine`` re-chooses positions of the finer levels only (docs/methods/cwt.md): the
+    coarsest source map is the growth's, every refined source lies inside the exemplar."""
     ex = texsyn.data.exemplar("gravel", size=64)
-    plain = texsyn.make_method("cwt").fit(ex).sample_with_map((96, 96), rng=4)
-    refined = texsyn.make_method("cwt", refine=True).fit(ex).sample_with_map((96, 96), rng=4)
-    moved = np.abs(refined.source_map.astype(int) - plain.source_map.astype(int)).max()
-    assert moved <= 2 * (1 + 2 + 4)  # at most refine_radius positions per refined level
+    maps = {}
+    for refine in (False, True):
+        seen = []
+        result = (
+            texsyn.make_method("cwt", refine=refine)
+            .fit(ex)
+            .sample_with_map((96, 96), rng=4, callback=seen.append)
+        )
+        maps[refine] = (result, next(p.info for p in seen if p.info))
+    (plain, plain_info), (refined, refined_info) = maps[False], maps[True]
+    np.testing.assert_array_equal(plain_info["cells"], refined_info["cells"])
+    assert not np.array_equal(plain_info["level_maps"][0], refined_info["level_maps"][0])
     assert not np.array_equal(plain.image, refined.image)
+    for level, m in enumerate(refined_info["level_maps"]):
+        assert m.min() >= 0 and np.all(m.max(axis=(0, 1)) < np.array(ex.shape) // 2 ** (level + 1))
 
 
 def test_wei_levoy_tsvq_with_one_leaf_is_the_exact_search():

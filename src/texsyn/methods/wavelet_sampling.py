@@ -12,10 +12,17 @@ The algorithm of the paper's section 3.1, step by step (``docs/methods/cwt.md``)
      (:meth:`ComplexWaveletSampling._grow_coarsest`, with
      :func:`texsyn.drivers.raster.grow_pixels`); one position there summarises a
      ``2^L x 2^L`` pixel area, so a small window sees large structures (whole words of a
-     text);
+     text). Beyond the paper, a candidate that continues an already placed neighbour
+     (Ashikhmin's coherent candidate, the paper's reference [1]) is preferred when it is
+     within ``(1 + coherence)`` of the best
+     (:class:`~texsyn.ops.coherence.CoherentSampler`), so that neighbouring blocks
+     continue each other instead of coming from unrelated places;
    - every finer level copies the ``2 x 2`` children of its parent's source
-     (:func:`block_indices`, the paper's Fig. 4), optionally re-searched locally
-     (:meth:`ComplexWaveletSampling._refine_level`, not in the paper).
+     (:func:`block_indices`, the paper's Fig. 4); with ``refine=True`` (the direction of
+     the paper's section 4, not in the paper) every finer level then re-chooses each
+     position among its neighbours' continued sources, with its full neighbourhood
+     (:meth:`ComplexWaveletSampling._refine_level`), which moves the seams between copied
+     blocks to where the two sources agree.
 
 3. Gather every subband and the low-pass image of every channel along these maps
    (:func:`propagate`) and invert the transform.
@@ -39,6 +46,7 @@ from ..drivers.coarse_to_fine import coarse_to_fine
 from ..drivers.raster import grow_pixels
 from ..errors import InputError
 from ..ops.canvas import crop_to_output, padded_canvas
+from ..ops.coherence import CoherentSampler, independent_groups, refine_group, window_offsets
 from ..ops.color import ColourSpace, colour_space
 from ..ops.nonparametric import NonParametricSampler
 from ..ops.patches import as_channels
@@ -49,6 +57,9 @@ from ._base import TextureSynthesizer
 from ._memory import nonparametric_bytes, output_bytes, shape_dims
 
 __all__ = ["ComplexWaveletSampling", "propagate", "block_indices"]
+
+#: most passes of the refinement over a level (it stops earlier when a pass changes nothing)
+REFINE_SWEEPS = 3
 
 
 def block_indices(grid: np.ndarray, block: int) -> np.ndarray:
@@ -100,9 +111,10 @@ class ComplexWaveletSampling(TextureSynthesizer):
 
     Efros-Leung growth (Gaussian-weighted window, candidates within ``tolerance`` of the best)
     on the six complex subbands of the coarsest level, seeded with the whole exemplar at the
-    centre; the chosen source positions drive the copy of every finer level and of the
-    low-pass image through the coefficient tree; colour is synthesised on Y and the same
-    coordinates carry U and V (``docs/methods/cwt.md``).
+    centre, preferring the continuation of an already placed neighbour (``coherence``); the
+    chosen source positions drive the copy of every finer level and of the low-pass image
+    through the coefficient tree; colour is synthesised on Y and the same coordinates carry U
+    and V (``docs/methods/cwt.md``).
 
     Parameters
     ----------
@@ -122,21 +134,34 @@ class ComplexWaveletSampling(TextureSynthesizer):
         or only 'valid' ones whose window lies inside.
     filters : str
         'a' (near_sym_a + qshift_a) or 'b' (near_sym_b + qshift_b) Kingsbury filters.
+    coherence : float
+        Beyond the paper (Ashikhmin's coherent candidates, the paper's reference [1]): at the
+        coarsest level, the best continuation of an already placed neighbour (its source
+        shifted by the offset between them) is taken when its distance is within
+        ``(1 + coherence)`` of the best; 0 gives the paper's rule alone. Neighbouring blocks
+        then continue each other (mortar lines, text lines) instead of coming from unrelated
+        places.
     refine : bool
-        Beyond the paper: re-search every finer level locally (within ``refine_radius``
-        positions of the propagated source) to reduce blur and seams at block borders.
+        Beyond the paper (its section 4 names the direction): re-choose every position of
+        every finer level, with its full (non-causal) neighbourhood, among its propagated
+        source and the continuations of its neighbours' sources, which moves the seams
+        between copied blocks to where the sources agree.
     refine_radius : int
-        Search radius of the refinement, in positions of each level.
+        Also consider, at the finer levels, the sources within this many positions of the
+        propagated one (0: only the neighbours' continuations).
 
     References
     ----------
     C. Gallagher, A. Kokaram, "Wavelet based texture synthesis", sections 2-3, Figs. 1 and 4.
+    M. Ashikhmin, "Synthesizing natural textures", I3D 2001, section 3.
 
     Notes
     -----
     Limitations (paper, section 4): mild blur, more visible on sharp textures, because the
-    copied blocks' filter supports overlap. ``epsilon`` is the deprecated name of
-    ``tolerance``.
+    copied blocks' filter supports overlap. Continuations are whole ``2^L x 2^L`` blocks, so
+    where no continuation exists (beyond the exemplar's border) a structure still breaks at
+    a block border; ``refine`` moves such seams but cannot create the missing content.
+    ``epsilon`` is the deprecated name of ``tolerance``.
     """
 
     name = "cwt"
@@ -155,8 +180,9 @@ class ComplexWaveletSampling(TextureSynthesizer):
         seed: Annotated[str, OneOf(("exemplar", "random"))] = "exemplar",
         candidates: Annotated[str, OneOf(("all", "valid"))] = "all",
         filters: Annotated[str, OneOf(("a", "b"))] = "a",
+        coherence: Annotated[float, Range(0.0, 10.0)] = 2.0,
         refine: bool = False,
-        refine_radius: Annotated[int, Range(1, 4)] = 1,
+        refine_radius: Annotated[int, Range(0, 4)] = 0,
     ):
         self.levels = levels
         self.window = window
@@ -164,6 +190,7 @@ class ComplexWaveletSampling(TextureSynthesizer):
         self.seed = seed
         self.candidates = candidates
         self.filters = filters
+        self.coherence = coherence
         self.refine = refine
         self.refine_radius = refine_radius
 
@@ -186,9 +213,9 @@ class ComplexWaveletSampling(TextureSynthesizer):
     def memory_terms(self, exemplar_shape, output_shape=None) -> dict[str, float]:
         """DT-CWT pyramids and the windows of the coarsest level; the output's pyramid and maps.
 
-        The filters of length ``m`` are applied by gathering ``m`` shifted copies of an image,
-        and ``refine`` compares ``window^2`` complex neighbourhoods per level-0 position, which
-        dominates large outputs (``docs/memory.md``).
+        The filters of length ``m`` are applied by gathering ``m`` shifted copies of an image;
+        ``refine`` holds a zero-padded copy of one exemplar level and a copy of one output
+        source map (``docs/memory.md``).
         """
         h, w, c = shape_dims(exemplar_shape)
         q = 2**self.levels
@@ -207,13 +234,13 @@ class ComplexWaveletSampling(TextureSynthesizer):
         assert grid is not None
         full = float(grid[0] * q) * float(grid[1] * q)
         terms["growth at the coarsest level"] = transient
+        if self.coherence > 0:  # CoherentSampler: the windows' values carry their sources
+            terms["growth at the coarsest level"] += 16.0 * (top_h * top_w + grid[0] * grid[1])
         terms["coefficient maps"] = 16.0 * full * (1.0 / 3 + 4.0 / 4**self.levels + 1.5)
         terms["one output pyramid and its inverse"] = pyramid / k * full + (8.0 * taps + 8.0) * full
         terms["output planes"] = 8.0 * c * full + output_bytes(c, output_shape)
-        if self.refine:
-            # per level-0 position (full / 4): template, candidate windows and their
-            # difference, window^2 x 6 complex values each, and two real squares
-            terms["local refinement"] = 84.0 * self.window**2 * full
+        if self.refine:  # the padded level-0 subbands of the exemplar, one level-0 source map
+            terms["refinement"] = 24.0 * k + 4.0 * full
         return terms
 
     def _grid(self, shape: tuple[int, int]) -> tuple[int, int]:
@@ -268,8 +295,11 @@ class ComplexWaveletSampling(TextureSynthesizer):
         The seed (the whole exemplar grid, or a random ``3 x 3`` block) is placed at the
         centre; every other position takes a random one of the exemplar positions whose
         Gaussian-weighted window distance over the six complex subbands is within
-        ``(1 + tolerance)`` of the best. No error threshold: the candidate set is always
-        accepted, coefficients have no fixed scale.
+        ``(1 + tolerance)`` of the best, unless the best continuation of a known neighbour is
+        within ``(1 + coherence)`` of the best
+        (:class:`~texsyn.ops.coherence.CoherentSampler`; not with ``coherence=0``, the
+        paper's rule). No error threshold: the candidate set is always accepted,
+        coefficients have no fixed scale.
 
         Returns
         -------
@@ -288,8 +318,9 @@ class ComplexWaveletSampling(TextureSynthesizer):
                 s,
                 s,
             )
+        sampler = CoherentSampler(self.sampler_, self.coherence) if self.coherence > 0 else self.sampler_
         _, source = grow_pixels(
-            self.sampler_,
+            sampler,
             grid,
             tolerance=self.tolerance,
             max_error=np.inf,
@@ -315,12 +346,20 @@ class ComplexWaveletSampling(TextureSynthesizer):
         return refined
 
     def _refine_level(self, level: int, current: np.ndarray) -> np.ndarray:
-        """Local re-search of one finer level around its propagated sources (not in the paper).
+        """Re-choose every position of a finer level among its neighbours' continuations (``refine``).
 
-        Every output position compares the window of coefficients that ``current`` assembles
-        around it with the exemplar windows around its propagated source and the neighbours
-        of that source within ``refine_radius``, and keeps the best (the propagated source
-        wins ties). The paper's section 4 names this blur as the direction of future work.
+        Not in the paper; its section 4 asks for the finer levels to be refined instead of
+        only copied. Each position compares the Gaussian-weighted window (``window`` wide, the
+        position itself left out) of the level's six subbands assembled by ``current`` with
+        the exemplar's window around each candidate: its propagated source, the sources
+        within ``refine_radius`` positions of it, and the continuation of each of its eight
+        neighbours (the neighbour's source shifted by the offset between them); it keeps the
+        closest, the propagated source winning ties. Where two copied blocks meet, the
+        positions along the border so take the side whose continuation agrees with the other,
+        and the seam moves to where the sources agree (along a mortar line rather than across
+        it). Exemplar windows are zero-padded, as the paper pads; groups of positions that lie
+        in no other's window are updated together, in a fixed order, and passes repeat until
+        one changes nothing (at most :data:`REFINE_SWEEPS`).
 
         Parameters
         ----------
@@ -334,31 +373,20 @@ class ComplexWaveletSampling(TextureSynthesizer):
         ndarray of int
             The refined source map, same shape.
         """
-        rad, half = self.refine_radius, self.window // 2
-        offsets = sorted(
-            ((di, dj) for di in range(-rad, rad + 1) for dj in range(-rad, rad + 1)),
-            key=lambda o: abs(o[0]) + abs(o[1]),
-        )  # the propagated source first: it wins ties
-        ys, xs = np.mgrid[-half : half + 1, -half : half + 1]
-        ex_band = self.pyramids_[0].highpasses[level]
-        eh, ew = ex_band.shape[:2]
-        out_band = ex_band[current[..., 0], current[..., 1]]
-        oh, ow = out_band.shape[:2]
-        rows = np.clip(np.arange(oh)[:, None, None, None] + ys, 0, oh - 1)
-        cols = np.clip(np.arange(ow)[None, :, None, None] + xs, 0, ow - 1)
-        template = out_band[rows, cols]  # (oh, ow, w, w, 6)
-        best = np.full((oh, ow), np.inf)
-        choice = current.copy()
-        for di, dj in offsets:
-            cand_r = np.clip(current[..., 0] + di, 0, eh - 1)
-            cand_c = np.clip(current[..., 1] + dj, 0, ew - 1)
-            win = ex_band[
-                np.clip(cand_r[..., None, None] + ys, 0, eh - 1),
-                np.clip(cand_c[..., None, None] + xs, 0, ew - 1),
-            ]
-            dist = np.sum(np.abs(win - template) ** 2, axis=(2, 3, 4))
-            better = dist < best
-            best = np.where(better, dist, best)
-            choice[..., 0] = np.where(better, cand_r, choice[..., 0])
-            choice[..., 1] = np.where(better, cand_c, choice[..., 1])
+        half, rad = self.window // 2, self.refine_radius
+        local = [(a, b) for a in range(-rad, rad + 1) for b in range(-rad, rad + 1) if (a, b) != (0, 0)]
+        local.sort(key=lambda o: (abs(o[0]) + abs(o[1]), o))
+        offsets = np.array(local, dtype=np.int64).reshape(-1, 2)
+        oy, ox = window_offsets(self.window)
+        gauss = np.exp(-(oy**2 + ox**2) / (2.0 * (self.window / 6.4) ** 2))
+        gauss[half, half] = 0.0  # the position itself is what is chosen again
+        band = self.pyramids_[0].highpasses[level]
+        padded = np.pad(band, ((half, half), (half, half), (0, 0)))  # the paper's zero padding
+        choice = np.ascontiguousarray(current, dtype=np.int64).copy()
+        for _ in range(REFINE_SWEEPS):
+            changed = 0
+            for rows, cols in independent_groups(choice.shape[:2], half + 1):
+                changed += refine_group(rows, cols, choice, padded, gauss, offsets, half)
+            if changed == 0:
+                break
         return choice
