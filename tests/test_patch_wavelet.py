@@ -215,6 +215,21 @@ def test_kept_regions_are_nested_and_as_large_as_asked(transform, gravel_feature
         coefficients.kept_region(1.2)
 
 
+def test_modify_removes_the_asked_share_of_an_input_whose_sides_are_not_powers_of_two():
+    """The share is counted on the input, not on its extension to powers of two: ranking the
+    whole extended grid removed 0.49 / 0.685 / 0.902 of a 33x40 input for ratios 0.25 / 0.5 /
+    0.75, and 0.16 / 0.48 / 0.80 of a 20x64 one."""
+    gravel = texsyn.data.exemplar("gravel", size=48)
+    brick = texsyn.data.exemplar("brick", size=64)
+    method = texsyn.make_method("patch_wavelet", sigma=(0.0, 0.2)).fit(gravel)
+    for shape in [(33, 40), (20, 64)]:
+        results = method.modify(brick[: shape[0], : shape[1]], [0.25, 0.5, 0.75])
+        removed = [1.0 - r.kept.mean() for r in results]
+        np.testing.assert_allclose(removed, [0.25, 0.5, 0.75], atol=1.0 / (shape[0] * shape[1]))
+        for a, b in zip(results, results[1:]):
+            assert np.all(b.kept <= a.kept)
+
+
 def test_restoring_inverse_rebuilds_the_kept_region_and_synthesises_the_rest(transform, gravel_features):
     coefficients = transform.forward(gravel_features)
     # everything kept: the analysed map exactly (the literal inverse only up to gamma's injectivity)

@@ -166,6 +166,24 @@ def test_mslg_post_processing_and_refine_take_outputs_down_to_one_pixel():
         ps.refine(np.zeros((0, 3)))
 
 
+@pytest.mark.parametrize("texture", ["brick", "gravel"])
+def test_refine_leaves_a_flat_image_flat_instead_of_failing(texture):
+    """A flat band has no skewness or kurtosis to impose (``portilla_projections.is_flat``):
+    solving for them on rounding noise raised numpy's LinAlgError for every flat input (1x1
+    to 16x16) with a 48x48 brick or gravel exemplar, so MSLG's post-processing of a 1x1
+    output failed."""
+    exemplar = texsyn.data.exemplar(texture, size=48)
+    for scales in (3, 4):
+        ps = texsyn.make_method("portilla_simoncelli", n_scales=scales, n_iterations=2).fit(exemplar)
+        for shape in [(1, 1), (1, 3), (2, 2), (3, 3), (16, 16)]:
+            out = ps.refine(np.full(shape, 0.5))
+            assert out.shape == shape and np.isfinite(out).all()
+    mslg = texsyn.make_method("mslg", patch_size=8, post="portilla_simoncelli", post_iterations=2).fit(
+        exemplar
+    )
+    assert mslg.sample((1, 1), rng=0).shape == (1, 1)
+
+
 def test_agrees_with_plenoptic_when_installed():
     """Our grey statistics equal plenoptic's PortillaSimoncelli ones after its documented
     normalisations: corrected variance (N - 1) in the pixel moments; auto-correlations divided

@@ -145,11 +145,15 @@ def test_outputs_smaller_than_a_patch_are_not_stretched_to_the_whole_histogram(n
     only clipped to the range (``match_exemplar_marginals``)."""
     exemplar = texsyn.data.exemplar("gravel", size=64)
     method = texsyn.make_method(name, patch_size=20, n_neighbors=10).fit(exemplar)
-    small = method.sample((13, 9), rng=0)
-    assert exemplar.min() <= small.min() and small.max() <= exemplar.max()
+    spans = []
+    for seed in range(6):
+        small = method.sample((13, 9), rng=seed)
+        assert exemplar.min() <= small.min() and small.max() <= exemplar.max()
+        spans.append(float(small.max() - small.min()))
     # as wide as a 13x9 crop of the exemplar, not as its whole histogram: the crops' ranges
-    # span 0.58 (median) .. 0.67 (90th percentile) .. 0.77, the whole exemplar 0.83; measured
-    # 0.49-0.50 here, 0.76 when the 117 values were matched to the whole histogram
+    # span 0.58 (median) .. 0.67 (90th percentile) .. 0.77, the whole exemplar 0.83; the
+    # median over six seeds here is at most the crops' median plus a tenth; matched to the
+    # whole histogram every seed gave 0.76
     crops = np.lib.stride_tricks.sliding_window_view(exemplar, (13, 9))
     ranges = crops.max(axis=(-2, -1)) - crops.min(axis=(-2, -1))
-    assert float(small.max() - small.min()) <= float(np.quantile(ranges, 0.9))
+    assert float(np.median(spans)) <= float(np.median(ranges)) + 0.1

@@ -220,9 +220,10 @@ def modify(
 ):
     """Modify the texture INPUT (an image file or builtin:NAME) toward EXEMPLAR (Peyré 2007).
 
-    INPUT is expressed with the exemplar's patches and decomposed; wavelet details below
-    RATIO times the largest are removed before rebuilding. Deterministic (no seed). Also
-    writes OUTPUT.json.
+    INPUT is expressed with the exemplar's patches and decomposed; its wavelet details are
+    removed on the share RATIO of INPUT where they carry the least energy (with
+    --thresholding coefficient: those below RATIO times the largest) before rebuilding.
+    Deterministic (no seed). Also writes OUTPUT.json.
     """
     depth = int(bit_depth)
     parameters = parse_params("patch_wavelet", params)

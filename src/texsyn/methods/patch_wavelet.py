@@ -376,7 +376,7 @@ class PatchWavelet(TextureSynthesizer):
             region = None
             if local:  # regions of low detail energy, smoothed over half the feature window
                 region = coefficients.kept_region(
-                    float(r), per_level=per_level, smoothing=transform.feature_width / 2
+                    float(r), per_level=per_level, smoothing=transform.feature_width / 2, valid=(h, w)
                 )
                 kept = coefficients.restricted(region)
             else:

@@ -88,6 +88,16 @@ def _closest_lambda(num, den, target, power, scale):
     return grid[np.argmin(np.abs(values - target))]
 
 
+#: variance, relative to ``max(1, mean^2)``, below which a band is flat: its skewness and
+#: kurtosis are rounding noise (a one-pixel or constant image), and are left alone
+FLAT_VARIANCE = 1e-20
+
+
+def is_flat(variance: float, mean: float) -> bool:
+    """Whether a band of this variance and mean has no shape to impose moments on."""
+    return not variance > FLAT_VARIANCE * max(1.0, float(mean) ** 2)
+
+
 def _solve_lambda(coeffs_num, coeffs_den, target, power):
     """Smallest |lambda| with num(l)^2 = target^2 den(l)^power (sign of num = sign of target)."""
     num = np.polynomial.Polynomial(coeffs_num)
@@ -117,7 +127,7 @@ def impose_skewness(x: np.ndarray, target: float) -> np.ndarray:
     d = (x - mean).ravel()
     d2 = d * d
     m2 = d2.mean()
-    if m2 <= 0:
+    if is_flat(m2, mean):
         return x
     m3 = np.dot(d2, d) / d.size
     g = d2 - (m3 / m2) * d - m2
@@ -145,7 +155,7 @@ def impose_kurtosis(x: np.ndarray, target: float) -> np.ndarray:
     d2 = d * d
     d3 = d2 * d
     m = [1.0, 0.0, d2.mean(), d3.mean(), np.dot(d2, d2) / n, np.dot(d3, d2) / n, np.dot(d3, d3) / n]
-    if m[2] <= 0:
+    if is_flat(m[2], mean):
         return x
     gram = np.array([[m[i + j] for j in range(3)] for i in range(3)])
     rhs = np.array([m[3], m[4], m[5]])

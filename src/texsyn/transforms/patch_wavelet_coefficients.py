@@ -128,23 +128,43 @@ class PatchWaveletCoefficients(Coefficients):
                 out += np.kron(n**2, cell)
         return out
 
-    def kept_region(self, ratio: float, *, per_level: bool = False, smoothing: float = 4.0) -> np.ndarray:
+    def kept_region(
+        self,
+        ratio: float,
+        *,
+        per_level: bool = False,
+        smoothing: float = 4.0,
+        valid: tuple[int, int] | None = None,
+    ) -> np.ndarray:
         """Where local thresholding keeps the input: a boolean ``(n_h, n_w)`` map.
 
         The :meth:`detail_energy` map is smoothed by a Gaussian of ``smoothing`` samples and
-        the share ``ratio`` of the map's samples with the lowest smoothed energy is removed
-        (ties broken by position, C order): ``ratio = 0`` keeps everything, ``ratio = 1``
-        nothing, and the kept regions of larger ratios lie inside those of smaller ones.
+        the share ``ratio`` of the samples with the lowest smoothed energy is removed (ties
+        broken by position, C order): ``ratio = 0`` keeps everything, ``ratio = 1`` nothing,
+        and the kept regions of larger ratios lie inside those of smaller ones. ``valid``
+        ``(h, w)`` is the input's part of the grid (its top-left corner; the rest extends it
+        to powers of two): the share is counted there, and an extension sample is removed
+        when its energy is at most that of the last valid sample removed.
         """
         if not 0.0 <= ratio <= 1.0:
             raise ValueError(f"ratio must be in [0, 1], got {ratio!r}")
         energy = self.detail_energy(per_level=per_level)
         if smoothing > 0:
             energy = gaussian_filter(energy, float(smoothing), mode="reflect")
-        order = np.argsort(energy, axis=None, kind="stable")
-        keep = np.ones(energy.size, dtype=bool)
-        keep[order[: int(round(ratio * energy.size))]] = False
-        return keep.reshape(energy.shape)
+        h, w = energy.shape if valid is None else (int(valid[0]), int(valid[1]))
+        inside = energy[:h, :w]
+        order = np.argsort(inside, axis=None, kind="stable")
+        removed = int(round(ratio * inside.size))
+        keep_inside = np.ones(inside.size, dtype=bool)
+        keep_inside[order[:removed]] = False
+        if removed == 0:
+            keep = np.ones(energy.shape, dtype=bool)
+        elif removed == inside.size:
+            keep = np.zeros(energy.shape, dtype=bool)
+        else:
+            keep = energy > inside.ravel()[order[removed - 1]]
+        keep[:h, :w] = keep_inside.reshape(inside.shape)
+        return keep
 
     def restricted(self, region: np.ndarray) -> PatchWaveletCoefficients:
         """The coefficients with the details outside ``region`` removed (section 5.2).
