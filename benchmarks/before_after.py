@@ -30,7 +30,7 @@ EXEMPLARS = {
     "stone": "gh_tartavel_vistex/Stone-02.png",
     "straw": "gh_tartavel_vistex/Fabric-13.png",
 }
-METHODS = ["lg", "clg", "rclg", "mslg", "portilla_simoncelli"]
+METHODS = ["lg", "clg", "rclg", "mslg", "portilla_simoncelli", "sparse", "cwt"]
 
 
 def render(out: Path, textures: Path) -> None:
