@@ -252,6 +252,7 @@ def main(argv: list[str] | None = None) -> int:
         help="keep outputs and scores here; reuse them for methods not in --only",
     )
     parser.add_argument("--only", nargs="*", default=None, help="with --store: run only these methods again")
+    parser.add_argument("--start", type=int, default=0, help="skip the first N textures (after --grey)")
     parser.add_argument(
         "--sheet-ext", default="png", choices=("png", "jpg"), help="file type of the contact sheets"
     )
@@ -262,6 +263,7 @@ def main(argv: list[str] | None = None) -> int:
     textures = load_textures(args.textures, args.limit)
     if args.grey:
         textures = with_grey(textures)
+    textures = textures[args.start :]
     table, _ = quality_table(
         textures, args.methods, args.details, args.sheets, Store(args.store), args.only, args.sheet_ext
     )
