@@ -4,7 +4,7 @@ Usage::
 
     python benchmarks/bench_quality.py [--textures DIR] [--methods NAME ...] [--limit N]
                                        [--grey] [--details FILE] [--sheets DIR]
-                                       [--store DIR [--only NAME ...]]
+                                       [--store DIR [--only NAME ...] [--cached]] [--start N]
                                        [--sizes 128 256 512 1024] [--budget SECONDS]
                                        [--out benchmarks/quality.md] [--plot benchmarks/time_vs_size.png]
 
@@ -17,7 +17,9 @@ the contrast ratio within 0.8-1.2. ``--details`` writes one table per method wit
 exemplar's figures; ``--sheets`` writes one contact sheet per exemplar (the exemplar, then
 each method's output, in the order of ``--methods``; none for the luma runs). ``--store DIR`` keeps every output
 and its scores; a later run with ``--only NAME ...`` runs only those methods again and reads
-the others back (a method changed, the rest not).
+the others back (a method changed, the rest not); ``--start N`` skips the first textures (a
+long run split over processes, each with its own store), and ``--cached`` runs nothing and
+reports what the store holds.
 
 The second part times each method on one 128x128 colour exemplar for output sides of
 ``--sizes`` and plots time against size (log-log, needs matplotlib: ``pip install
@@ -122,7 +124,7 @@ class Store:
 
 
 def quality_table(
-    textures, methods, details=None, sheets=None, store=None, only=None, sheet_ext="png"
+    textures, methods, details=None, sheets=None, store=None, only=None, sheet_ext="png", cached_only=False
 ) -> tuple[list[str], dict]:
     per_method: dict[str, dict[str, list[float]]] = {m: {"seconds": []} for m in methods}
     failures: dict[str, list[str]] = {m: [] for m in methods}
@@ -136,6 +138,10 @@ def quality_table(
             if kept is not None:
                 out, seconds, scores = kept
                 outputs.append(out)
+            elif cached_only:
+                failures[name].append(f"{label}: not run")
+                outputs.append(np.ones((2 * ex.shape[0], 2 * ex.shape[1]) + ex.shape[2:], np.float32))
+                continue
             else:
                 try:
                     start = time.perf_counter()
@@ -254,6 +260,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--only", nargs="*", default=None, help="with --store: run only these methods again")
     parser.add_argument("--start", type=int, default=0, help="skip the first N textures (after --grey)")
     parser.add_argument(
+        "--cached", action="store_true", help="with --store: run nothing, report what it holds"
+    )
+    parser.add_argument(
         "--sheet-ext", default="png", choices=("png", "jpg"), help="file type of the contact sheets"
     )
     parser.add_argument("--out", type=Path, default=REPO / "benchmarks" / "quality.md")
@@ -265,7 +274,14 @@ def main(argv: list[str] | None = None) -> int:
         textures = with_grey(textures)
     textures = textures[args.start :]
     table, _ = quality_table(
-        textures, args.methods, args.details, args.sheets, Store(args.store), args.only, args.sheet_ext
+        textures,
+        args.methods,
+        args.details,
+        args.sheets,
+        Store(args.store),
+        [] if args.cached else args.only,
+        args.sheet_ext,
+        args.cached,
     )
     lines = [
         "# texsyn methods over a texture folder",
