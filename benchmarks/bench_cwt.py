@@ -44,8 +44,7 @@ from _common import DEFAULT_TEXTURES, REPO, RESULTS, machine
 
 import texsyn
 from texsyn.io import read_image, write_image
-from texsyn.metrics import contrast_ratio, ps_distance, sharpness_ratio
-from texsyn.ops import luma
+from texsyn.metrics import contrast_ratio, ps_distance, sharpness_ratio, source_seam_cost
 
 #: name -> (file under the shared textures, kind)
 EXEMPLARS = {
@@ -90,24 +89,8 @@ def border_share(source: np.ndarray, block: int, seed: tuple[int, int]) -> float
 
 
 def seam_cost(source: np.ndarray, exemplar: np.ndarray) -> float:
-    """The ``seam`` figure (x 1e4; the same as ``seam_cost`` of ``tests/test_cwt_quality.py``)."""
-    ex = luma(exemplar) if exemplar.ndim == 3 else np.asarray(exemplar, dtype=np.float64)
-    s = np.asarray(source, dtype=np.int64)
-    h, w = ex.shape
-    total, count = 0.0, 0
-    for step in ((0, 1), (1, 0)):
-        a = s[: s.shape[0] - step[0], : s.shape[1] - step[1]]
-        b = s[step[0] :, step[1] :]
-        for here, there, shift in ((a, b, step), (b, a, (-step[0], -step[1]))):
-            cont = here + shift
-            ok = (cont[..., 0] >= 0) & (cont[..., 0] < h) & (cont[..., 1] >= 0) & (cont[..., 1] < w)
-            diff = (
-                ex[np.clip(cont[..., 0], 0, h - 1), np.clip(cont[..., 1], 0, w - 1)]
-                - ex[there[..., 0], there[..., 1]]
-            )
-            total += float(np.sum(np.where(ok, diff * diff, 0.0)))
-            count += a.shape[0] * a.shape[1]
-    return 1e4 * total / count
+    """The ``seam`` figure: :func:`texsyn.metrics.source_seam_cost` x 1e4."""
+    return 1e4 * source_seam_cost(source, exemplar)
 
 
 def load(textures: Path, file: str) -> np.ndarray:

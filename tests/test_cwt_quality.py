@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 import texsyn
+from texsyn.metrics import source_seam_cost
 from texsyn.ops.coherence import CoherentSampler, pick_within
 from texsyn.ops.nonparametric import NonParametricSampler, _pick_candidates
 
@@ -42,26 +43,6 @@ def border_share(source: np.ndarray, block: int, seed: tuple[int, int]) -> float
     down = np.all(s[rows] - s[rows - 1] == (1, 0), axis=-1)
     down_out = ~(inside[rows] & inside[rows - 1])
     return float((right[right_out].sum() + down[down_out].sum()) / (right_out.sum() + down_out.sum()))
-
-
-def seam_cost(source: np.ndarray, exemplar: np.ndarray) -> float:
-    """Mean, over right and bottom neighbour pairs, of the squared difference between what
-    one pixel's source continues into and what its neighbour shows (both ways): 0 for pairs
-    copied together, large where a structure breaks across a seam."""
-    s = np.asarray(source, dtype=np.int64)
-    h, w = exemplar.shape[:2]
-    total, count = 0.0, 0
-    for step in ((0, 1), (1, 0)):
-        a = s[: s.shape[0] - step[0], : s.shape[1] - step[1]]
-        b = s[step[0] :, step[1] :]
-        for here, there, shift in ((a, b, step), (b, a, (-step[0], -step[1]))):
-            cont = here + shift
-            ok = (cont[..., 0] >= 0) & (cont[..., 0] < h) & (cont[..., 1] >= 0) & (cont[..., 1] < w)
-            diff = exemplar[np.clip(cont[..., 0], 0, h - 1), np.clip(cont[..., 1], 0, w - 1)]
-            diff = diff - exemplar[there[..., 0], there[..., 1]]
-            total += float(np.sum(np.where(ok, diff * diff, 0.0)))
-            count += a.shape[0] * a.shape[1]
-    return total / count
 
 
 def brick_runs(**params) -> list:
@@ -128,8 +109,8 @@ def test_neighbouring_blocks_continue_each_other_on_bricks():
 def test_refine_moves_the_seams_to_where_the_sources_agree():
     plain, refined = brick_runs(), brick_runs(refine=True)
     share = np.mean([border_share(r.source_map, 8, BRICK.shape) for r in refined])
-    before = np.mean([seam_cost(r.source_map, BRICK) for r in plain])
-    after = np.mean([seam_cost(r.source_map, BRICK) for r in refined])
+    before = np.mean([source_seam_cost(r.source_map, BRICK) for r in plain])
+    after = np.mean([source_seam_cost(r.source_map, BRICK) for r in refined])
     assert share > 0.85, share
     assert after < 0.8 * before, (after, before)
 

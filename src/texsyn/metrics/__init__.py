@@ -31,6 +31,7 @@ from .texture import (
     mean_gradient,
     radial_log_spectrum,
     sharpness_ratio,
+    source_seam_cost,
     spectrum_distance,
 )
 
@@ -47,6 +48,7 @@ __all__ = [
     "innovation",
     "laplacian_band_energies",
     "local_mean_spread",
+    "source_seam_cost",
     "mean_coherence",
     "mean_gradient",
     "nearest_patch_field",

@@ -220,3 +220,30 @@ def _grey(image) -> np.ndarray:
     """The luma of a colour image, a grey image as it is: ``(H, W)`` float64."""
     x = as_channels(as_exemplar(image, name="image"))
     return luma(x) if x.shape[2] == 3 else x[..., 0]
+
+
+def source_seam_cost(source_map, exemplar) -> float:
+    """How badly neighbouring sources disagree, from a source map ``(H, W, 2)``.
+
+    For every right and bottom neighbour pair (both ways), the squared difference between
+    the exemplar pixel that one pixel's source continues into (its source shifted by the
+    step) and the pixel its neighbour shows, on the exemplar's luma; the mean over pairs. 0
+    for pairs copied together, large where a structure breaks across a seam (``cwt``'s
+    continuity figure, ``benchmarks/cwt.md``). Continuations that leave the exemplar count 0.
+    """
+    ex = np.asarray(exemplar, dtype=np.float64)
+    ex = luma(ex) if ex.ndim == 3 and ex.shape[2] == 3 else (ex[..., 0] if ex.ndim == 3 else ex)
+    s = np.asarray(source_map, dtype=np.int64)
+    h, w = ex.shape
+    total, count = 0.0, 0
+    for step in ((0, 1), (1, 0)):
+        a = s[: s.shape[0] - step[0], : s.shape[1] - step[1]]
+        b = s[step[0] :, step[1] :]
+        for here, there, shift in ((a, b, step), (b, a, (-step[0], -step[1]))):
+            cont = here + np.asarray(shift)
+            ok = (cont[..., 0] >= 0) & (cont[..., 0] < h) & (cont[..., 1] >= 0) & (cont[..., 1] < w)
+            diff = ex[np.clip(cont[..., 0], 0, h - 1), np.clip(cont[..., 1], 0, w - 1)]
+            diff = diff - ex[there[..., 0], there[..., 1]]
+            total += float(np.sum(np.where(ok, diff * diff, 0.0)))
+            count += a.shape[0] * a.shape[1]
+    return total / max(count, 1)
