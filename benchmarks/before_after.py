@@ -9,7 +9,7 @@ Usage::
 
 ``render`` synthesises, for each exemplar of ``EXEMPLARS`` (its top-left 128x128 crop) and
 each method of ``METHODS``, a 256x256 texture with seed 0 and default parameters, and saves
-them as ``.npy`` files. ``sheet`` writes ``benchmarks/results/before_after_<exemplar>.png``:
+them as ``.npy`` files. ``sheet`` writes ``benchmarks/results/before_after_<exemplar>.jpg``:
 the exemplar, then one row per version (the methods in order), and prints the sharpness and
 contrast ratios and ``ps_distance`` of both versions.
 """
@@ -75,7 +75,7 @@ def sheet(before: Path, after: Path, textures: Path) -> None:
             )
         head = np.ones((132, rows[0].shape[1], 3), np.float32)
         head[:128, :128] = exemplar
-        write_image(RESULTS / f"before_after_{key}.png", np.concatenate([head] + rows, axis=0))
+        write_image(RESULTS / f"before_after_{key}.jpg", np.concatenate([head] + rows, axis=0))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -27,7 +27,7 @@ committed). Measured per run:
 * ``time``: seconds of ``fit`` + ``sample``.
 
 ``report`` writes the table of both labels and the contact sheets
-``benchmarks/results/cwt_structured.png`` and ``cwt_stochastic.png`` (exemplar, then
+``benchmarks/results/cwt_structured.jpg`` and ``cwt_stochastic.jpg`` (exemplar, then
 before plain / before refine / after plain / after refine).
 """
 
@@ -208,14 +208,14 @@ def report(textures: Path, out: Path) -> None:
     lines.append("")
     for kind in ("structured", "stochastic"):
         keys = [k for k, (_, c) in EXEMPLARS.items() if c == kind]
-        sheet(keys, textures, RESULTS / f"cwt_{kind}.png")
+        sheet(keys, textures, RESULTS / f"cwt_{kind}.jpg")
         lines.append(
-            f"Contact sheet `benchmarks/results/cwt_{kind}.png`: exemplar, before (refine False, "
+            f"Contact sheet `benchmarks/results/cwt_{kind}.jpg`: exemplar, before (refine False, "
             "True), after (refine False, True)."
         )
-    zoom(["Brick-00", "Brick-02", "text"], RESULTS / "cwt_zoom.png")
+    zoom(["Brick-00", "Brick-02", "text"], RESULTS / "cwt_zoom.jpg")
     lines.append(
-        "Zoom `benchmarks/results/cwt_zoom.png`: the top-right quarter of the outputs of Brick-00, "
+        "Zoom `benchmarks/results/cwt_zoom.jpg`: the top-right quarter of the outputs of Brick-00, "
         "Brick-02 and text (half seed, half new texture), twice enlarged, in the same order."
     )
     out.write_text("\n".join(lines) + "\n")
