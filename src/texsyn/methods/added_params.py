@@ -56,13 +56,17 @@ ADDED_PARAMS: dict[str, dict[str, AddedParam]] = {
     "mslg": {
         "coarse_seam": AddedParam("0.2.0", "average", "the coarsest patches were averaged (eq. 15)"),
         "histogram": _NO_HISTOGRAM,
+        "highpass": AddedParam("0.2.0", "none", "only the pixel histogram was matched"),
     },
     "cwt": {
         "coherence": AddedParam(
             "0.2.0", 0.0, "each coarse block was drawn among all candidates (the paper's rule)"
         )
     },
-    "portilla_simoncelli": {"record_distance": AddedParam("0.2.0", False, "no diagnostics were returned")},
+    "portilla_simoncelli": {
+        "record_distance": AddedParam("0.2.0", False, "no diagnostics were returned"),
+        "final_highpass": AddedParam("0.2.0", False, "the output was the last iteration's"),
+    },
     "sparse": {
         "spectrum_weight": AddedParam(
             "0.2.0", DEFAULT, "used only with lowpass_ref='spectrum', which older files do not hold"

@@ -35,6 +35,7 @@ from ..models.portilla_projections import (
     impose_parent_regression,
     impose_pixel_statistics,
     shrink_highpass,
+    shrink_image_highpass,
 )
 from ..ops.canvas import crop_to_output, extend_to_canvas, padded_canvas
 from ..ops.color import ColourSpace, colour_space
@@ -194,6 +195,12 @@ class PortillaSimoncelli(TextureSynthesizer):
         exemplar's (the :func:`texsyn.metrics.ps_distance` families, in the model's
         channels) and return it with the result (``SynthesisResult.diagnostics``); it costs
         one more analysis per iteration.
+    final_highpass : bool
+        After the last iteration, scale the output's own high frequencies down to the
+        exemplar's high-pass variance and impose the pixel statistics again
+        (:func:`~texsyn.models.portilla_projections.shrink_image_highpass`; not in the paper,
+        ``docs/methods/portilla_simoncelli.md``, "Deviations"). ``False`` gives the paper's
+        loop alone.
     """
 
     name = "portilla_simoncelli"
@@ -213,6 +220,7 @@ class PortillaSimoncelli(TextureSynthesizer):
         n_iterations: Annotated[int, Range(0, 2000)] = 50,
         colour: Annotated[str, OneOf(("rgb", "pca", "grey", "joint"))] = "rgb",
         record_distance: bool = False,
+        final_highpass: bool = True,
     ):
         self.n_scales = n_scales
         self.n_orientations = n_orientations
@@ -220,6 +228,7 @@ class PortillaSimoncelli(TextureSynthesizer):
         self.n_iterations = n_iterations
         self.colour = colour
         self.record_distance = record_distance
+        self.final_highpass = final_highpass
 
     def min_exemplar_size(self) -> tuple[int, str]:
         side = 2 ** (self.n_scales + 1)
@@ -277,6 +286,13 @@ class PortillaSimoncelli(TextureSynthesizer):
         """The projections from ``initial``; with ``record_distance``, the distance per iteration."""
         pyramid = ComplexSteerablePyramid(initial.shape[1:], self.n_scales, self.n_orientations, single=True)
         step = projection_step(self.statistics_, pyramid, self.lags)
+        if self.final_highpass:
+            iterate, target = step, self.statistics_
+
+            def step(x: np.ndarray, iteration: int) -> np.ndarray:
+                x = iterate(x, iteration)
+                return shrink_image_highpass(x, target, pyramid) if iteration == iterations - 1 else x
+
         history: list[dict[str, float]] = []
         if self.record_distance:
             project = step

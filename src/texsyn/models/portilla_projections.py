@@ -30,6 +30,7 @@ __all__ = [
     "impose_pixel_statistics",
     "impose_skewness",
     "shrink_highpass",
+    "shrink_image_highpass",
 ]
 
 
@@ -98,8 +99,33 @@ def is_flat(variance: float, mean: float) -> bool:
     return not variance > FLAT_VARIANCE * max(1.0, float(mean) ** 2)
 
 
+def _monotone_interval(num, den, power) -> tuple[float, float]:
+    """The interval around ``l = 0`` on which ``num(l) / den(l)^(power/2)`` is monotone.
+
+    Its ends are the critical points nearest to 0 on either side (``-inf``/``inf`` where
+    there is none): the roots of ``num' den - (power/2) num den'``, the numerator of the
+    ratio's derivative.
+    """
+    num = np.polynomial.Polynomial(num)
+    den = np.polynomial.Polynomial(den)
+    roots = (num.deriv() * den - (power / 2.0) * num * den.deriv()).roots()
+    real = roots[np.abs(roots.imag) < 1e-6 * np.maximum(1.0, np.abs(roots.real))].real
+    below, above = real[real < 0], real[real > 0]
+    return (below.max() if below.size else -np.inf), (above.min() if above.size else np.inf)
+
+
 def _solve_lambda(coeffs_num, coeffs_den, target, power):
-    """Smallest |lambda| with num(l)^2 = target^2 den(l)^power (sign of num = sign of target)."""
+    """The step ``l`` of ``modskew`` / ``modkurt`` (Portilla and Simoncelli 2000, section 4).
+
+    The root of ``num(l)^2 = target^2 den(l)^power`` (sign of num = sign of target) of smallest
+    ``|l|`` within the interval around 0 where the moment ratio is monotone
+    (:func:`_monotone_interval`). A root beyond the ratio's nearest extremum exists when the
+    ratio turns back (a skewed band asked for a lower kurtosis than its extremum); reaching it
+    moves ``l g`` far enough to dominate the band (a cubic of its values: the skewness lost,
+    the high-pass energy multiplied), so the extremum nearest the target is taken instead,
+    as the reference code saturates an unreachable moment. ``None`` when the target is
+    unreachable and the ratio has no extremum.
+    """
     num = np.polynomial.Polynomial(coeffs_num)
     den = np.polynomial.Polynomial(coeffs_den)
     if power == 3:  # skewness: num / den^1.5 = t  ->  num^2 - t^2 den^3 = 0, sign(num) = sign(t)
@@ -110,9 +136,14 @@ def _solve_lambda(coeffs_num, coeffs_den, target, power):
     real = roots[np.abs(roots.imag) < 1e-6 * np.maximum(1.0, np.abs(roots.real))].real
     if power == 3:
         real = real[np.sign(num(real)) == np.sign(target)] if target != 0 else real
-    if real.size == 0:
+    low, high = _monotone_interval(coeffs_num, coeffs_den, power)
+    real = real[(real >= low) & (real <= high)]
+    if real.size:
+        return real[np.argmin(np.abs(real))]
+    ends = np.array([end for end in (low, high) if np.isfinite(end)])
+    if ends.size == 0:
         return None
-    return real[np.argmin(np.abs(real))]
+    return ends[np.argmin(np.abs(num(ends) / den(ends) ** (power / 2.0) - target))]
 
 
 def impose_skewness(x: np.ndarray, target: float) -> np.ndarray:
@@ -320,6 +351,29 @@ def shrink_highpass(highpass: np.ndarray, target_variance: np.ndarray) -> np.nda
         hp_var > target_variance, np.sqrt(target_variance / np.where(hp_var > 0, hp_var, 1.0)), 1.0
     )
     return highpass * shrink[:, None, None]
+
+
+def shrink_image_highpass(x: np.ndarray, target: PSStatistics, pyramid) -> np.ndarray:
+    """Scale the high frequencies of the image ``(C, H, W)`` itself down to the high-pass variance.
+
+    The iteration shrinks the high-pass residual, but the image it rebuilds also carries the
+    high frequencies that the skewness and kurtosis of the partially reconstructed image
+    (pointwise maps) created beyond its band, and the pixel step adds its own: measured on the
+    output, the high-pass variance stayed up to twice the exemplar's (``color_4``'s green and
+    blue). This projection, run once after the last iteration
+    (``docs/methods/portilla_simoncelli.md``, "Deviations"), removes ``1 - f`` of the image's
+    ``H0^2``-filtered part, ``f`` chosen so that its ``H0``-filtered part has the target
+    variance (only too much is removed, as for the residual); the pixel statistics are
+    imposed again after it.
+    """
+    spec = pyramid.fft(x)
+    measured = np.mean(pyramid.ifft(spec * pyramid.hi0).real ** 2, axis=(-2, -1))
+    wanted = target.highpass_variance
+    factor = np.where(measured > wanted, np.sqrt(wanted / np.where(measured > 0, measured, 1.0)), 1.0)
+    if np.all(factor == 1.0):
+        return x
+    high = pyramid.ifft(spec * pyramid.hi0**2).real
+    return impose_pixel_statistics(x + high * (factor - 1.0)[:, None, None], target)
 
 
 def impose_pixel_statistics(x: np.ndarray, target: PSStatistics) -> np.ndarray:
