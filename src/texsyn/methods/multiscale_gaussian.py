@@ -36,7 +36,7 @@ from ..drivers.raster import Block, fill_blocks, raster_positions
 from ..errors import InputError
 from ..models.gaussian import PatchSource
 from ..models.histograms import SubbandHistograms, subband_histograms
-from ..ops.canvas import crop_to_output, padded_canvas
+from ..ops.canvas import crop_to_output, extend_to_canvas, padded_canvas
 from ..ops.fourier import periodic_smooth_decomposition
 from ..ops.patches import as_channels
 from ..ops.progress import Reporter
@@ -256,11 +256,7 @@ class MSLG(TextureSynthesizer):
         model = self.highpass_model_
         assert model is not None
         pyramid = SteerablePyramid(padded_canvas(image.shape[:2], minimum=2), 1, 1)
-        canvas = np.pad(
-            image,
-            [(0, pyramid.shape[0] - image.shape[0]), (0, pyramid.shape[1] - image.shape[1]), (0, 0)],
-            mode="symmetric",
-        )
+        canvas = extend_to_canvas(image, pyramid.shape, mode="symmetric")
         _, match_band = model.matchers(pyramid)
         coeffs = pyramid.forward(canvas)
         coeffs["highpass"] = match_band["highpass"](coeffs["highpass"])
