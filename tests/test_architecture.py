@@ -26,6 +26,7 @@ SRC = Path(__file__).resolve().parents[1] / "src" / "texsyn"
 LAYERS: dict[str, int] = {
     "texsyn.errors": 0,
     "texsyn._version": 0,
+    "texsyn._lazy": 0,
     "texsyn._validation": 1,
     "texsyn.io": 2,
     "texsyn.data": 2,
@@ -179,6 +180,8 @@ def _imports(module: str, path: Path) -> list[Import]:
                 for alias in node.names
                 if alias.name == "texsyn" or alias.name.startswith("texsyn.")
             ]
+        elif isinstance(node, ast.Call) and _is_lazy_table(node):
+            out += _lazy_table_imports(node, module, is_package, shim, tree)
         elif isinstance(node, ast.Call):
             func = node.func
             dynamic = (isinstance(func, ast.Name) and func.id in functions) or (
@@ -199,6 +202,62 @@ def _imports(module: str, path: Path) -> list[Import]:
                     current = f"{current}.{attr}"
                     out.append(Import(node.lineno, current, None, shim, dynamic=True))
     return out
+
+
+#: the one module allowed to import a computed name: it loads the submodules named in the
+#: literal tables given to its ``lazy_exports``, which this test reads as imports instead
+LAZY_LOADER = "texsyn._lazy"
+
+
+def _is_lazy_table(node: ast.Call) -> bool:
+    func = node.func
+    return (isinstance(func, ast.Name) and func.id == "lazy_exports") or (
+        isinstance(func, ast.Attribute) and func.attr == "lazy_exports"
+    )
+
+
+def _literal_table(expr: ast.expr | None, assigned: dict[str, ast.expr]) -> list[tuple[str, str]] | None:
+    """The (name, submodule) pairs of a literal dict, following ``**NAME`` and module-level names."""
+    if isinstance(expr, ast.Name) and expr.id in assigned:
+        return _literal_table(assigned[expr.id], assigned)
+    if not isinstance(expr, ast.Dict):
+        return None
+    pairs: list[tuple[str, str]] = []
+    for key, value in zip(expr.keys, expr.values, strict=True):
+        if key is None:  # {**OTHER, ...}
+            inner = _literal_table(value, assigned)
+            if inner is None:
+                return None
+            pairs += inner
+        elif (
+            isinstance(key, ast.Constant) and isinstance(value, ast.Constant) and isinstance(value.value, str)
+        ):
+            pairs.append((str(key.value), value.value))
+        else:
+            return None
+    return pairs
+
+
+def _lazy_table_imports(
+    node: ast.Call, module: str, is_package: bool, shim: bool, tree: ast.Module
+) -> list[Import]:
+    """``lazy_exports(__name__, {name: submodule, ...})`` as the imports it makes.
+
+    The table must be a literal dict (directly, through a module-level name, or merged with
+    ``**``) so that its targets can be checked like imports; anything else is ``<computed>``.
+    """
+    package = module if is_package else module.rpartition(".")[0]
+    assigned = {
+        target.id: stmt.value
+        for stmt in tree.body
+        if isinstance(stmt, (ast.Assign, ast.AnnAssign)) and stmt.value is not None
+        for target in (stmt.targets if isinstance(stmt, ast.Assign) else [stmt.target])
+        if isinstance(target, ast.Name)
+    }
+    pairs = _literal_table(node.args[1] if len(node.args) > 1 else None, assigned)
+    if pairs is None:
+        return [Import(node.lineno, "<computed>", None, shim, dynamic=True)]
+    return [Import(node.lineno, f"{package}.{submodule}", name, shim) for name, submodule in pairs]
 
 
 def _is_deprecated_alias(path: Path) -> bool:
@@ -234,6 +293,8 @@ def upward_imports(module: str, path: Path) -> list[str]:
     for imp in _imports(module, path):
         if imp.in_shim:
             continue
+        if imp.target == "<computed>" and module == LAZY_LOADER:
+            continue  # the loader of lazy_exports tables, whose targets are checked where they are given
         if imp.target == "<computed>":
             wrong.append(f"{path.name}:{imp.line} imports a computed module name outside a deprecation shim")
             continue

@@ -116,3 +116,25 @@ def test_periodic_component_of_a_periodic_smooth_image_is_close_to_itself():
     u = 0.5 + 0.2 * np.sin(2 * np.pi * xx / 32) * np.cos(2 * np.pi * 2 * yy / 32)
     p, s = periodic_smooth_decomposition(u)
     assert np.abs(s).max() < 0.05
+
+
+@pytest.mark.parametrize("quantum", [None, 0.5, 0.1])
+def test_numpy_and_compiled_rank_scatters_give_the_same_bytes(quantum):
+    """``match_sorted_rows`` uses NumPy until numba is loaded (start-up, issue 20) and the
+    compiled kernel after: both put equal values in position order."""
+    from texsyn.ops.histogram import _argsort_rows, _scatter_by_rank, _scatter_by_rank_numpy
+
+    rng = np.random.default_rng(3)
+    x = rng.standard_normal((5, 3000))
+    if quantum is not None:
+        x = np.round(x / quantum) * quantum
+    x[2, :50] = 0.0  # a long run, and runs that reach the row's ends
+    targets = np.sort(rng.standard_normal((7, 3000)), axis=1)
+    rows = np.array([6, 0, 3, 3, 1])
+    order = _argsort_rows(x)
+    compiled = _scatter_by_rank(x, order.copy(), targets, rows)
+    assert np.array_equal(_scatter_by_rank_numpy(x, order.copy(), targets, rows), compiled)
+    stable = np.argsort(x, axis=1, kind="stable")
+    expected = np.empty_like(x)
+    np.put_along_axis(expected, stable, targets[rows], axis=1)
+    assert np.array_equal(compiled, expected)

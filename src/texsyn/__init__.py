@@ -11,21 +11,37 @@ models (:func:`save`, :func:`load`; ``docs/persistence.md``).
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from . import data
-from ._version import __version__
+from ._lazy import lazy_exports
 from .methods import (
     METHODS,
-    Frame,
-    Modification,
     Progress,
     SynthesisResult,
     TextureSynthesizer,
     get_method,
     make_method,
 )
-from .persistence import load, save
+
+if TYPE_CHECKING:  # the names for type checkers; at run time ``__getattr__`` loads them
+    from ._version import __version__
+    from .methods import Frame, Modification
+    from .persistence import load, save
+
+# the method modules and the model files load on first use (``docs/performance.md``)
+__getattr__, __dir__ = lazy_exports(
+    __name__,
+    {
+        "Frame": "methods",
+        "Modification": "methods",
+        "__version__": "_version",
+        "load": "persistence",
+        "save": "persistence",
+    },
+)
 
 __all__ = [
     "animate",

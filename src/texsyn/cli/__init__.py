@@ -9,12 +9,17 @@
 - :mod:`~texsyn.cli.common`: the steps every command shares (outputs claimed before any
   work, the memory check, the seed, the JSON sidecar);
 - :mod:`~texsyn.cli.progress`: the progress display;
-- the commands: :mod:`~texsyn.cli.synthesis` (``synth``, ``modify``, ``animate``),
-  :mod:`~texsyn.cli.comparison` (``compare``) and :mod:`~texsyn.cli.listing` (``methods``).
+- the commands, each loaded when it runs (:class:`~texsyn.cli.app.LazyCommands`):
+  :mod:`~texsyn.cli.synthesis` (``synth``), :mod:`~texsyn.cli.modification` (``modify``),
+  :mod:`~texsyn.cli.animation` (``animate``), :mod:`~texsyn.cli.comparison` (``compare``)
+  and :mod:`~texsyn.cli.listing` (``methods``).
 """
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
+from .._lazy import lazy_exports
 from .app import (
     EXIT_BAD_INPUT,
     EXIT_BROKEN_PIPE,
@@ -26,14 +31,27 @@ from .app import (
     cli,
     main,
 )
-from .comparison import compare
-from .listing import list_methods
-from .options import MAX_SIDE
-from .synthesis import animate, modify, synth
 
-for _command in (synth, modify, animate, compare, list_methods):
-    cli.add_command(_command)
-del _command
+if TYPE_CHECKING:  # the names for type checkers; at run time ``__getattr__`` loads them
+    from .animation import animate
+    from .comparison import compare
+    from .listing import list_methods
+    from .modification import modify
+    from .options import MAX_SIDE
+    from .synthesis import synth
+
+# the commands load when run (``app.LazyCommands``); their functions on first use here
+__getattr__, __dir__ = lazy_exports(
+    __name__,
+    {
+        "MAX_SIDE": "options",
+        "animate": "animation",
+        "compare": "comparison",
+        "list_methods": "listing",
+        "modify": "modification",
+        "synth": "synthesis",
+    },
+)
 
 __all__ = [
     "EXIT_BAD_INPUT",
@@ -44,6 +62,11 @@ __all__ = [
     "EXIT_TERMINATED",
     "MAX_SIDE",
     "Terminated",
+    "animate",
     "cli",
+    "compare",
+    "list_methods",
     "main",
+    "modify",
+    "synth",
 ]

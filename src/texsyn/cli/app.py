@@ -19,7 +19,8 @@ or none through :class:`texsyn.io.OutputSet`: nothing is created or replaced on 
 
 This module holds the ``texsyn`` group, the entry point and the mapping of every outcome to
 one line and an exit status; the commands are in :mod:`~texsyn.cli.synthesis`,
-:mod:`~texsyn.cli.comparison` and :mod:`~texsyn.cli.listing`.
+:mod:`~texsyn.cli.modification`, :mod:`~texsyn.cli.animation`, :mod:`~texsyn.cli.comparison`
+and :mod:`~texsyn.cli.listing`, each imported when its command runs (:data:`COMMANDS`).
 """
 
 from __future__ import annotations
@@ -34,11 +35,13 @@ from typing import Any
 
 import click
 
+from .._lazy import lazy_exports
 from .._version import __version__
 from ..errors import InputError, OutputWriteError
 from .common import State
 
 __all__ = [
+    "COMMANDS",
     "EXIT_BAD_INPUT",
     "EXIT_BROKEN_PIPE",
     "EXIT_FAILURE",
@@ -65,12 +68,53 @@ class Terminated(BaseException):
 
 
 # ---------------------------------------------------------------------------- the group
+#: each command and the name of its function, in the order ``texsyn --help`` lists them
+COMMANDS = {
+    "synth": "synth",
+    "modify": "modify",
+    "animate": "animate",
+    "compare": "compare",
+    "methods": "list_methods",
+}
+
+#: loads a command's function from the module of this package that defines it
+_command_function, _ = lazy_exports(
+    __package__ or "",
+    {
+        "synth": "synthesis",
+        "modify": "modification",
+        "animate": "animation",
+        "compare": "comparison",
+        "list_methods": "listing",
+    },
+)
+
+
+class LazyCommands(click.Group):
+    """A group whose commands are imported when invoked (or listed by ``--help``).
+
+    ``texsyn synth -m quilting`` then loads the ``synth`` command and the quilting method
+    only, not ``animate``'s grouplets or ``compare``'s metrics (``docs/performance.md``,
+    "Start-up").
+    """
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return list(COMMANDS)
+
+    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
+        function = COMMANDS.get(cmd_name)
+        if function is None:
+            return None
+        command: click.Command = _command_function(function)
+        return command
+
+
 def _set_debug(ctx: click.Context, param, value: bool) -> None:
     if value:
         ctx.ensure_object(State).debug = True
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(cls=LazyCommands, context_settings={"help_option_names": ["-h", "--help"]})
 @click.option(
     "--debug",
     is_flag=True,

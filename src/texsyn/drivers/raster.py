@@ -32,7 +32,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import ndimage
 
 from ..ops.canvas import padded_canvas
 from ..ops.nonparametric import NonParametricSampler, schedule_batches
@@ -258,6 +257,8 @@ def grow_pixels(
 
     n_filled, total = sh * sw, height * width
     threshold = float(max_error)
+    from scipy import ndimage  # 0.1 s of start-up that quilting and LG do not need
+
     ring = np.ones((3, 3), dtype=bool)
     while n_filled < total:
         # the pass: frontier pixels, shuffled, then the best-known first

@@ -8,36 +8,75 @@ resolve, with a :class:`DeprecationWarning`, through the module ``__getattr__`` 
 
 import importlib
 import warnings
+from typing import TYPE_CHECKING
 
-from .color import ColorPCA, ColourSpace, colour_space, luma, rgb_to_yuv, yuv_to_rgb
-from .fourier import periodic_smooth_decomposition
-from .histogram import (
-    HistogramMatcher,
-    hist_target,
-    match_histogram,
-    match_histogram_pca,
-    match_sorted,
-    match_sorted_rows,
-    transport_energy,
-)
-from .patches import (
-    as_channels,
-    average_patches,
-    extend_index,
-    extract_patches,
-    overlap_add,
-    wrap_seam_ratio,
-)
-from .positions import position_colors
-from .seams import boundary_cut_mask, cumulative_path_cost, min_path, overlap_error
-from .search import (
-    FFTPatchSearch,
-    NearestPatchIndex,
-    WeightedPatchBank,
-    knn_patches,
-    knn_select,
-    nearest_both_ways,
-)
+from .._lazy import lazy_exports
+
+if TYPE_CHECKING:  # the names for type checkers; at run time ``__getattr__`` loads them
+    from .color import ColorPCA, ColourSpace, colour_space, luma, rgb_to_yuv, yuv_to_rgb
+    from .fourier import periodic_smooth_decomposition
+    from .histogram import (
+        HistogramMatcher,
+        hist_target,
+        match_histogram,
+        match_histogram_pca,
+        match_sorted,
+        match_sorted_rows,
+        transport_energy,
+    )
+    from .patches import (
+        as_channels,
+        average_patches,
+        extend_index,
+        extract_patches,
+        overlap_add,
+        wrap_seam_ratio,
+    )
+    from .positions import position_colors
+    from .seams import boundary_cut_mask, cumulative_path_cost, min_path, overlap_error
+    from .search import (
+        FFTPatchSearch,
+        NearestPatchIndex,
+        WeightedPatchBank,
+        knn_patches,
+        knn_select,
+        nearest_both_ways,
+    )
+
+#: each public name and the submodule defining it (loaded on first use: ``_lazy``)
+_EXPORTS = {
+    "ColorPCA": "color",
+    "ColourSpace": "color",
+    "colour_space": "color",
+    "luma": "color",
+    "rgb_to_yuv": "color",
+    "yuv_to_rgb": "color",
+    "periodic_smooth_decomposition": "fourier",
+    "HistogramMatcher": "histogram",
+    "hist_target": "histogram",
+    "match_histogram": "histogram",
+    "match_histogram_pca": "histogram",
+    "match_sorted": "histogram",
+    "match_sorted_rows": "histogram",
+    "transport_energy": "histogram",
+    "as_channels": "patches",
+    "average_patches": "patches",
+    "extend_index": "patches",
+    "extract_patches": "patches",
+    "overlap_add": "patches",
+    "wrap_seam_ratio": "patches",
+    "position_colors": "positions",
+    "boundary_cut_mask": "seams",
+    "cumulative_path_cost": "seams",
+    "min_path": "seams",
+    "overlap_error": "seams",
+    "FFTPatchSearch": "search",
+    "NearestPatchIndex": "search",
+    "WeightedPatchBank": "search",
+    "knn_patches": "search",
+    "knn_select": "search",
+    "nearest_both_ways": "search",
+}
 
 __all__ = [
     "ColorPCA",
@@ -98,19 +137,26 @@ _MOVED_MODULES = (
 )
 
 
-def __getattr__(name: str):
-    """Deprecated names: resolve those that moved to :mod:`texsyn.transforms`, with a warning."""
+def _deprecated(name: str):
+    """Deprecated names: resolve those that moved to :mod:`texsyn.transforms`, with a warning.
+
+    Called by the package's ``__getattr__`` (:func:`texsyn._lazy.lazy_exports`), so the
+    user's line is three frames up.
+    """
     if name in _MOVED_MODULES:  # ``texsyn.ops.dtcwt`` without importing it, as round 1 allowed
         with warnings.catch_warnings(record=True) as caught:  # re-issued at the caller's line
             warnings.simplefilter("always", DeprecationWarning)
             alias = importlib.import_module(f".{name}", __name__)
         said = [str(w.message) for w in caught if issubclass(w.category, DeprecationWarning)]
         warnings.warn(
-            said[0] if said else f"texsyn.ops.{name} is deprecated", DeprecationWarning, stacklevel=2
+            said[0] if said else f"texsyn.ops.{name} is deprecated", DeprecationWarning, stacklevel=3
         )
         return alias
     module = _MOVED.get(name)
     if module is None:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    warnings.warn(f"texsyn.ops.{name} is deprecated; use {module}.{name}", DeprecationWarning, stacklevel=2)
+    warnings.warn(f"texsyn.ops.{name} is deprecated; use {module}.{name}", DeprecationWarning, stacklevel=3)
     return getattr(importlib.import_module(module), name)
+
+
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, fallback=_deprecated)

@@ -20,9 +20,9 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 
-import numba
 import numpy as np
 
+from .jit import jit
 from .nonparametric import NonParametricSampler
 
 __all__ = [
@@ -182,7 +182,7 @@ def independent_groups(shape: tuple[int, int], step: int) -> Iterator[tuple[np.n
                 yield rows.ravel(), cols.ravel()
 
 
-@numba.njit(cache=True)
+@jit()
 def refine_group(rows, cols, choice, padded, gauss, offsets, half):  # pragma: no cover - compiled
     """Re-choose the sources of one group of positions among their neighbours' continuations.
 

@@ -11,11 +11,11 @@ from __future__ import annotations
 import heapq
 import math
 
-import numba
 import numpy as np
 from scipy.ndimage import gaussian_filter, zoom
 
 from ..errors import InputError
+from .jit import jit, prange
 
 __all__ = [
     "association_fields",
@@ -59,7 +59,7 @@ def structure_tensor_orientation(
     return np.stack([np.cos(theta), np.sin(theta)], axis=-1), np.clip(coherence, 0.0, 1.0)
 
 
-@numba.njit(cache=True)
+@jit()
 def _propagate_signs(vr, vc, start_r, start_c):
     n0, n1 = vr.shape
     out_r = vr.copy()
@@ -154,7 +154,7 @@ def periodic_tiling(flow: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     return orient_field(stretched / np.linalg.norm(stretched, axis=-1, keepdims=True))
 
 
-@numba.njit(cache=True)
+@jit()
 def _field_at(pr, pc, hr, hc, ur, uc, mask):
     """Sign-aligned bilinear interpolation of a unit field; ``(0, 0)`` when no corner counts."""
     n0, n1 = ur.shape
@@ -194,13 +194,13 @@ def _field_at(pr, pc, hr, hc, ur, uc, mask):
     return vr / norm, vc / norm
 
 
-@numba.njit(parallel=True, cache=True)
+@jit(parallel=True)
 def _integrate(ur, uc, mask, levels, step):
     n0, n1 = ur.shape
     total = n0 * n1
     out = np.empty((levels, total), dtype=np.int64)
     n_steps = int(round(2.0 ** (levels - 1) / step))
-    for idx in numba.prange(total):
+    for idx in prange(total):
         r0 = idx // n1
         c0 = idx % n1
         if mask[r0, c0]:

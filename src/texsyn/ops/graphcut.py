@@ -12,8 +12,9 @@ from __future__ import annotations
 
 import heapq
 
-import numba
 import numpy as np
+
+from .jit import jit
 
 __all__ = ["kwatra_costs", "seam_take_old", "cut_value", "graphcut_reassemble"]
 
@@ -50,7 +51,7 @@ def kwatra_costs(old: np.ndarray, new: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return num_h / (den_h + eps), num_v / (den_v + eps)
 
 
-@numba.njit(cache=True)
+@jit()
 def _dual_shortest_cut(cost_h, cost_v):
     """Minimum cut separating column 0 from column w-1, as a dual shortest path.
 
@@ -127,7 +128,7 @@ def _dual_shortest_cut(cost_h, cost_v):
     return cut_h, cut_v
 
 
-@numba.njit(cache=True)
+@jit()
 def _flood_from_left(cut_h, cut_v):
     """Pixels reachable from column 0 without crossing a cut pair (4-connectivity)."""
     h = cut_h.shape[0]

@@ -9,10 +9,10 @@ target of each rank is the barycentre of the reference mass the monotone plan se
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
 from .color import ColorPCA
+from .jit import jit, prange
 from .linalg import parallel_map, worker_count
 
 __all__ = [
@@ -119,7 +119,16 @@ def match_sorted_rows(
         raise ValueError(f"values {x.shape} and targets {t.shape} must be equal (B, N) arrays")
     if index.size and (index.min() < 0 or index.max() >= t.shape[0]):
         raise ValueError(f"rows must index the {t.shape[0]} target rows")
-    return _scatter_by_rank(x, _argsort_rows(x), t, index)
+    order = _argsort_rows(x)
+    if _scatter_by_rank.loaded or x.size >= COMPILED_SCATTER_VALUES:
+        return _scatter_by_rank(x, order, t, index)
+    return _scatter_by_rank_numpy(x, order, t, index)
+
+
+#: from this many values in one call the compiled scatter is used even when numba is not
+#: loaded yet: it is about 3 ns a value faster, which repays numba's 0.4 s of loading
+#: (``docs/performance.md``, "Start-up"); both give the same bytes
+COMPILED_SCATTER_VALUES = 1 << 24
 
 
 def _argsort_rows(x: np.ndarray) -> np.ndarray:
@@ -132,11 +141,33 @@ def _argsort_rows(x: np.ndarray) -> np.ndarray:
     return np.concatenate(parallel_map(lambda rows: np.argsort(x[rows], axis=-1), chunks))
 
 
-@numba.njit(parallel=True, cache=True)
+def _scatter_by_rank_numpy(
+    x: np.ndarray, order: np.ndarray, targets: np.ndarray, rows: np.ndarray
+) -> np.ndarray:
+    """:func:`_scatter_by_rank` with NumPy: the runs of equal values (rare in continuous data)
+    are put in position order by one ``lexsort`` over their elements only."""
+    ranked = np.take_along_axis(x, order, axis=1)
+    equal_next = ranked[:, 1:] == ranked[:, :-1]
+    if equal_next.any():
+        tied = np.zeros(x.shape, dtype=bool)
+        tied[:, 1:] |= equal_next
+        tied[:, :-1] |= equal_next
+        r, k = np.nonzero(tied)  # row-major: each run's elements are consecutive
+        starts = np.ones(r.size, dtype=bool)
+        starts[1:] = (r[1:] != r[:-1]) | ~equal_next[r[1:], k[1:] - 1]
+        positions = order[r, k]
+        order = order.copy()
+        order[r, k] = positions[np.lexsort((positions, np.cumsum(starts)))]
+    out = np.empty_like(x)
+    np.put_along_axis(out, order, targets[rows], axis=1)
+    return out
+
+
+@jit(parallel=True)
 def _scatter_by_rank(x, order, targets, rows):
     """``out[i, order[i, k]] = targets[rows[i], k]`` after sorting each run of equal values by position."""
     out = np.empty_like(x)
-    for i in numba.prange(x.shape[0]):
+    for i in prange(x.shape[0]):
         o = order[i]
         row = x[i]
         n = o.size

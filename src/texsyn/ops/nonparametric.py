@@ -19,9 +19,9 @@ from __future__ import annotations
 import warnings
 from collections.abc import Callable
 
-import numba
 import numpy as np
 
+from .jit import jit
 from .patches import as_channels, extract_patches
 from .progress import Reporter
 from .search import WeightedPatchBank
@@ -29,7 +29,7 @@ from .search import WeightedPatchBank
 __all__ = ["NonParametricSampler", "grow_texture", "schedule_batches"]
 
 
-@numba.njit(cache=True)
+@jit()
 def schedule_batches(rows, cols, radius, height, width, max_batch):
     """Split an ordered pixel list into batches that can be processed at once.
 
@@ -70,7 +70,7 @@ def schedule_batches(rows, cols, radius, height, width, max_batch):
     return batch_of, batch
 
 
-@numba.njit(cache=True)
+@jit()
 def _pick_candidates(d, tolerance, uniforms):
     """For every row: a uniformly chosen index among ``d <= (1 + tolerance) min d``."""
     n_rows, n_cols = d.shape

@@ -11,7 +11,6 @@ al. 2016's eq. 15 (LG's ``seam='average'``, MSLG's ``coarse_seam='average'``).
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage
 
 __all__ = [
     "boundary_cut_mask",
@@ -133,15 +132,67 @@ def boundary_cut_mask(error: np.ndarray, left: int, top: int) -> np.ndarray:
         take_new[:top, :] = np.arange(top)[:, None] >= path[None, :]
         return take_new
     ci, cj, v_cols, h_rows = l_shaped_cut(e, left, top)
+    side = _inside_l_cut(h, w, ci, cj, v_cols, h_rows)
+    if side is None:  # the two paths touch diagonally and may close off a pocket
+        side = _inside_l_cut_by_labels(h, w, ci, cj, v_cols, h_rows)
+    take_new = side
+    # outside the overlap the new patch is always taken
+    take_new[top:, left:] = True
+    return take_new
+
+
+def _inside_l_cut(
+    h: int, w: int, ci: int, cj: int, v_cols: np.ndarray, h_rows: np.ndarray
+) -> np.ndarray | None:
+    """The cut and the side of it holding the block's bottom-right pixel, or None.
+
+    The pixels right of the vertical path (rows ``ci ..``), below the horizontal path
+    (columns ``cj ..``) and not above-left of the corner are closed under 4-neighbour moves
+    that avoid the cut (a step left or up from them lands on the cut or among them, since
+    each path moves at most one pixel per step). From any of them, steps down or right reach
+    the bottom-right pixel (the paths stay off the last row and column) unless one of them,
+    ``(r, c)``, has the vertical path at ``(r + 1, c)`` and the horizontal one at
+    ``(r, c + 1)``: the paths touch diagonally and may close off a pocket. Without such a
+    pixel the side is exactly the 4-connected component that a labelling finds (the one
+    ``scipy.ndimage.label`` would give, 0.15 s of start-up); with one, None, and the caller
+    labels the components (``tests/test_seams.py`` compares both on random cuts).
+    """
+    if v_cols.max(initial=0) >= w - 1 or h_rows.max(initial=0) >= h - 1:
+        return None
+    r = np.arange(h)[:, None]
+    c = np.arange(w)[None, :]
+    vertical = np.full(h, -1, dtype=np.intp)
+    vertical[ci:] = v_cols
+    horizontal = np.full(w, -1, dtype=np.intp)
+    horizontal[cj:] = h_rows
+    right_of_vertical = (r < ci) | (c > vertical[:, None])
+    below_horizontal = (c < cj) | (r > horizontal[None, :])
+    marked = (c == vertical[:, None]) | (r == horizontal[None, :])
+    side = right_of_vertical & below_horizontal & ~((r < ci) & (c < cj)) & ~marked
+    # a pixel of that side at (r, c) with the vertical path at (r + 1, c) and the horizontal
+    # one at (r, c + 1) has no step down or right: a pocket may be closed off
+    touch_rows = np.arange(ci, h - 1)
+    touch_cols = v_cols[1:]
+    at = touch_cols + 1 - cj
+    on_path = (at >= 0) & (at < h_rows.size)
+    touching = h_rows[at[on_path]] == touch_rows[on_path]
+    if np.any(side[touch_rows[on_path][touching], touch_cols[on_path][touching]]):
+        return None
+    return side | marked
+
+
+def _inside_l_cut_by_labels(
+    h: int, w: int, ci: int, cj: int, v_cols: np.ndarray, h_rows: np.ndarray
+) -> np.ndarray:
+    """:func:`_inside_l_cut` by labelling the 4-connected components around the cut."""
+    from scipy import ndimage  # 0.15 s of start-up, for the rare cut that needs it
+
     marked = np.zeros((h, w), dtype=bool)
     marked[np.arange(ci, h), v_cols] = True
     marked[h_rows, np.arange(cj, w)] = True
     labels, _ = ndimage.label(~marked)
     reached = labels == labels[h - 1, w - 1] if not marked[h - 1, w - 1] else np.zeros_like(marked)
-    take_new = reached | marked
-    # outside the overlap the new patch is always taken
-    take_new[top:, left:] = True
-    return take_new
+    return reached | marked
 
 
 def leading_known(known: np.ndarray) -> tuple[int, int]:

@@ -25,9 +25,9 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-import numba
 import numpy as np
 
+from .jit import jit, prange
 from .linalg import matmul
 from .patches import as_channels
 
@@ -267,7 +267,7 @@ def knn_patches(
     return idx, dist
 
 
-@numba.njit(cache=True)
+@jit()
 def _fold_minima(gram, query_norm, bank_norm, offset, q_idx, q_dist, b_idx, b_dist):
     """One pass over a block of ``q . x`` products: row and column minima of the distances."""
     n_rows, n_cols = gram.shape
@@ -334,11 +334,11 @@ def nearest_both_ways(
     return q_idx, q_dist, b_idx, b_dist
 
 
-@numba.njit(parallel=True, cache=True)
+@jit(parallel=True)
 def _best_columns(gram, half_norm, k, out):
     """Per row, the ``k`` columns with the smallest ``half_norm[j] - gram[i, j]`` (ties: lower j)."""
     n_rows, n_cols = gram.shape
-    for i in numba.prange(n_rows):
+    for i in prange(n_rows):
         values = np.full(k, np.inf)
         index = np.zeros(k, dtype=np.int64)
         for j in range(n_cols):

@@ -38,8 +38,9 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
+
+from ..ops.jit import jit, prange
 
 __all__ = ["GroupletTightFrame", "checked_associations", "grouplet_weights"]
 
@@ -78,7 +79,7 @@ def grouplet_weights(levels: int) -> np.ndarray:
     return tau
 
 
-@numba.njit(cache=True)
+@jit()
 def _scan_order(target):
     """Ordering of the pixels at one scale computed from ``A_l``: a stable counting sort by target.
 
@@ -106,7 +107,7 @@ def _scan_order(target):
     return order
 
 
-@numba.njit(cache=True)
+@jit()
 def _masses(targets, orders):
     """Masses ``s_l`` (``L+1`` rows) of every pixel: ``s_0 = 1``, ``s_(l+1)(p) = s_l(p) + sum_(A_l m = p) s_l(m)``."""
     levels, n = targets.shape
@@ -120,7 +121,7 @@ def _masses(targets, orders):
     return masses
 
 
-@numba.njit(cache=True)
+@jit()
 def _schedule(targets, orders, masses):
     """The merges of every level in processing order, with their image-independent factors.
 
@@ -149,7 +150,7 @@ def _schedule(targets, orders, masses):
     return dst, detail, share, low
 
 
-@numba.njit(cache=True)
+@jit()
 def _forward(image, src, dst, detail, share, low):
     """Sequential in-place scan; returns the ``(L+1, N)`` coefficients and the number of updates.
 
@@ -176,7 +177,7 @@ def _forward(image, src, dst, detail, share, low):
     return out, count
 
 
-@numba.njit(cache=True)
+@jit()
 def _inverse(coefficients, src, dst, detail, share, low):
     """Undo the merges in reverse order; the mean of each pixel's two estimates is the adjoint."""
     levels, n = src.shape
@@ -200,24 +201,24 @@ def _inverse(coefficients, src, dst, detail, share, low):
     return r, count
 
 
-@numba.njit(parallel=True, cache=True)
+@jit(parallel=True)
 def _forward_rows(images, src, dst, detail, share, low):
     """:func:`_forward` of every row of ``images`` ``(B, N)``, rows in parallel: ``(L+1, B, N)``."""
     levels = src.shape[0]
     out = np.empty((levels + 1, images.shape[0], images.shape[1]))
     counts = np.zeros(images.shape[0], dtype=np.int64)
-    for i in numba.prange(images.shape[0]):
+    for i in prange(images.shape[0]):
         coefficients, counts[i] = _forward(images[i], src, dst, detail, share, low)
         out[:, i] = coefficients
     return out, counts
 
 
-@numba.njit(parallel=True, cache=True)
+@jit(parallel=True)
 def _inverse_rows(coefficients, src, dst, detail, share, low):
     """:func:`_inverse` of every row of ``(L+1, B, N)`` coefficients, rows in parallel: ``(B, N)``."""
     out = np.empty((coefficients.shape[1], coefficients.shape[2]))
     counts = np.zeros(coefficients.shape[1], dtype=np.int64)
-    for i in numba.prange(coefficients.shape[1]):
+    for i in prange(coefficients.shape[1]):
         out[i], counts[i] = _inverse(np.ascontiguousarray(coefficients[:, i]), src, dst, detail, share, low)
     return out, counts
 

@@ -1,0 +1,116 @@
+"""Numba-compiled kernels, compiled (or loaded from numba's cache) on their first call.
+
+Importing numba costs about 0.15 s and loading a cached kernel a few milliseconds more; a
+command that never calls a kernel (``texsyn synth -m random_phase``) should pay for neither
+(``docs/performance.md``, "Start-up"). A kernel is written as a plain function decorated with
+:func:`jit`; the decorator returns a :class:`LazyKernel` that imports numba and compiles the
+function with ``numba.njit(cache=True)`` when it is first called.
+
+A kernel may call another kernel of its module, and a parallel kernel loops over
+:data:`prange` (``range`` until compiled, numba's ``prange`` in the compiled code): at
+compile time the function is rebuilt over a copy of its module's namespace in which both
+are replaced by what numba compiles (numba reads global values as compile-time constants
+anyway).
+"""
+
+from __future__ import annotations
+
+import functools
+import threading
+import types
+from collections.abc import Callable
+from typing import Any
+
+__all__ = ["LazyKernel", "jit", "prange"]
+
+#: the parallel loop of a kernel: ``range`` in Python, numba's ``prange`` once compiled
+prange = range
+
+
+class LazyKernel:
+    """A function compiled by numba (``njit(cache=True)``) on its first call.
+
+    Parameters
+    ----------
+    py_func : callable
+        The kernel in plain Python (numba's nopython subset).
+    parallel : bool
+        Compile with ``parallel=True`` (loops over :data:`prange` run on numba's threads).
+
+    Attributes
+    ----------
+    py_func : callable
+        The Python function, callable without numba (tests, mutation runs).
+    """
+
+    def __init__(self, py_func: Callable[..., Any], parallel: bool = False) -> None:
+        self.py_func = py_func
+        self.parallel = parallel
+        self._compiled: Any = None
+        self._lock = threading.Lock()
+        functools.update_wrapper(self, py_func)
+
+    def compiled(self) -> Any:
+        """The numba dispatcher (compiling, or loading numba's cache, on the first use)."""
+        if self._compiled is None:
+            with self._lock:
+                if self._compiled is None:
+                    self._compiled = self._compile()
+        return self._compiled
+
+    @property
+    def loaded(self) -> bool:
+        """Whether this process has compiled (or loaded) the kernel already."""
+        return self._compiled is not None
+
+    def _compile(self) -> Any:
+        import numba
+
+        source = self.py_func
+        namespace = dict(source.__globals__)
+        for name in source.__code__.co_names:
+            value = namespace.get(name)
+            if isinstance(value, LazyKernel):
+                namespace[name] = value.compiled()
+            elif value is prange:
+                namespace[name] = numba.prange
+        rebuilt = types.FunctionType(
+            source.__code__, namespace, source.__name__, source.__defaults__, source.__closure__
+        )
+        rebuilt.__qualname__ = source.__qualname__
+        rebuilt.__module__ = source.__module__
+        rebuilt.__doc__ = source.__doc__
+        return numba.njit(cache=True, parallel=self.parallel)(rebuilt)
+
+    def __call__(self, *args: Any) -> Any:
+        return self.compiled()(*args)
+
+    def __repr__(self) -> str:
+        state = "compiled" if self._compiled is not None else "not compiled yet"
+        return f"<LazyKernel {self.py_func.__module__}.{self.py_func.__qualname__} ({state})>"
+
+
+def jit(*, parallel: bool = False) -> Callable[[Callable[..., Any]], LazyKernel]:
+    """Decorator: compile the function with numba on its first call (:class:`LazyKernel`).
+
+    Parameters
+    ----------
+    parallel : bool
+        Compile with ``parallel=True``; the kernel's parallel loops use :data:`prange`.
+
+    Examples
+    --------
+    >>> @jit()
+    ... def total(values):
+    ...     out = 0.0
+    ...     for v in values:
+    ...         out += v
+    ...     return out
+    >>> total.py_func([1.0, 2.0])
+    3.0
+    """
+
+    def decorate(py_func: Callable[..., Any]) -> LazyKernel:
+        return LazyKernel(py_func, parallel)
+
+    return decorate
