@@ -27,7 +27,7 @@ from PIL import Image
 
 import texsyn
 from texsyn.cli import main
-from texsyn.io import writing
+from texsyn.io import streaming, writing
 from texsyn.methods.random_phase import RandomPhase
 
 FAST = ["-m", "random_phase", "--size", "16x16", "-q"]
@@ -322,11 +322,14 @@ def no_space(*args, **kwargs):
     raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
 
-def test_disk_full_on_the_second_output_leaves_no_output(work, capsys, monkeypatch):
+@pytest.mark.parametrize("method", ["quilting", "cwt"])
+def test_disk_full_on_the_second_output_leaves_no_output(work, capsys, monkeypatch, method):
+    """Quilting streams its rows to both files (``texsyn.io.streaming``), cwt writes them whole."""
     monkeypatch.setattr(writing, "_encode_array", no_space)
+    monkeypatch.setattr(streaming.NpyRows, "_write", no_space)
     before = snapshot(work)
     code, err = run(
-        capsys, "synth", "ex.png", "-o", "out.png", "--source-map", "where.npy", "-p", "patch_size=8", "-q"
+        capsys, "synth", "ex.png", "-o", "out.png", "--source-map", "where.npy", "-m", method, "-q"
     )
     check_one_line(code, err, 1, "cannot write 'where.npy': No space left on device")
     assert snapshot(work) == before  # neither out.png, nor its sidecar, nor a temporary

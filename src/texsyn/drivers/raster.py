@@ -27,7 +27,7 @@ See ``docs/methods/efros_leung.md``, ``docs/methods/quilting.md`` and
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -37,7 +37,15 @@ from ..ops.canvas import padded_canvas
 from ..ops.nonparametric import NonParametricSampler, schedule_batches
 from ..ops.progress import Reporter
 
-__all__ = ["Block", "block_canvas", "block_positions", "fill_blocks", "grow_pixels", "raster_positions"]
+__all__ = [
+    "Block",
+    "block_canvas",
+    "block_positions",
+    "fill_block_rows",
+    "fill_blocks",
+    "grow_pixels",
+    "raster_positions",
+]
 
 
 # ---------------------------------------------------------------------------- block loop
@@ -168,6 +176,79 @@ def fill_blocks(
             if reporter is not None:
                 reporter(done, total)
     return known
+
+
+def fill_block_rows(
+    shape: tuple[int, int],
+    channels: int,
+    rows: Sequence[int] | np.ndarray,
+    cols: Sequence[int] | np.ndarray,
+    size: int,
+    choose: Callable[[Block], Any],
+    paste: Callable[[Block, Any], np.ndarray],
+    *,
+    reporter: Reporter | None = None,
+) -> Iterator[np.ndarray]:
+    """:func:`fill_blocks` holding one row of blocks at a time; yields finished output rows.
+
+    The blocks are visited and filled exactly as :func:`fill_blocks` fills a canvas of
+    zeros (same calls of ``choose`` and ``paste``, same content), but the canvas is a band
+    of ``size`` rows: when a row of blocks is done, the rows that the next one does not
+    overlap are final and are yielded, and the overlap moves to the top of the band. The
+    memory is ``size`` rows of the canvas whatever its height (``docs/performance.md``,
+    "Any size in bounded memory").
+
+    Parameters
+    ----------
+    shape : (int, int)
+        The output ``(height, width)``: the yielded rows are cropped to it.
+    channels : int
+        Channels of the canvas (the method may carry extra ones, e.g. its source map).
+    rows, cols : sequence of int
+        Block corners along each axis (ascending, evenly spaced rows), covering ``shape``.
+    size : int
+        Block side ``n``.
+    choose, paste : callable
+        As in :func:`fill_blocks`; a :class:`Block`'s ``row`` is its canvas row, and its
+        ``values`` and ``known`` are views of the band.
+    reporter : Reporter, optional
+        Receives ``(done, total)`` after every block.
+
+    Yields
+    ------
+    ndarray, shape (k, width, channels)
+        The next ``k`` finished rows of the output, top to bottom (float64).
+    """
+    height, width = shape
+    canvas_width = int(cols[-1]) + size
+    band = np.zeros((size, canvas_width, channels))
+    known = np.zeros((size, canvas_width), dtype=bool)
+    total = len(rows) * len(cols)
+    done = 0
+    emitted = 0
+    for k, x in enumerate(rows):
+        x = int(x)
+        for y in cols:
+            window = band[:, y : y + size]
+            mask = known[:, y : y + size]
+            block = Block(x, int(y), window, mask)
+            window[...] = paste(block, choose(block))
+            mask[...] = True
+            done += 1
+            if reporter is not None:
+                reporter(done, total)
+        last = k == len(rows) - 1
+        step = size if last else int(rows[k + 1]) - x
+        end = min(x + step, height)
+        if end > emitted:
+            yield band[emitted - x : end - x, :width].copy()
+            emitted = end
+        if not last:
+            kept = size - step  # the overlap with the next row of blocks
+            band[:kept] = band[step:]
+            band[kept:] = 0.0
+            known[:kept] = known[step:]
+            known[kept:] = False
 
 
 # ---------------------------------------------------------------------------- pixel growth

@@ -11,8 +11,13 @@ Write: PNG, JPEG and TIFF (8 bit; 16 bit for PNG and TIFF on request), ``.npy`` 
 UTF-8 text (JSON sidecars, HTML reports), MP4, WebM and GIF videos and folders of PNG frames.
 
 The path checks and file-system steps are in :mod:`texsyn.io.output_paths`, the encoders
-in :mod:`texsyn.io.encoders` and :mod:`texsyn.io.video`; the encoders are called here
-through module names (``_encode_image``...) so that a test can make one fail.
+in :mod:`texsyn.io.encoders` and :mod:`texsyn.io.video`, the writers of outputs streamed
+band by band in :mod:`texsyn.io.streaming`; the encoders are called here through module
+names (``_encode_image``...) so that a test can make one fail.
+
+Why this module is long: :class:`OutputSet` is one class whose steps (claim, stage whole or
+streamed outputs, commit, discard) share its staging state; the all-or-nothing rule lives
+in their interplay, and splitting the class would scatter it.
 """
 
 from __future__ import annotations
@@ -55,6 +60,7 @@ from .output_paths import (
     sidecar_path,
     write_error,
 )
+from .streaming import StagedRows, open_row_writer
 from .video import VIDEO_CODECS, encode_video
 from .video import FfmpegWriter as _FfmpegWriter  # noqa: F401 - a test makes ffmpeg fail through it
 from .video import ffmpeg_exe as _ffmpeg_exe
@@ -66,6 +72,7 @@ __all__ = [
     "VIDEO_FORMATS",
     "WRITE_FORMATS",
     "OutputSet",
+    "StagedRows",
     "atomic_write",
     "check_output_path",
     "sidecar_path",
@@ -124,6 +131,7 @@ class OutputSet:
         self._inputs: list[tuple[str, Path]] = []
         self._targets: dict[Path, tuple[str, bool]] = {}
         self._staged: dict[Path, Path] = {}
+        self._open_rows: list[StagedRows] = []
         self.committed = False
         for item in inputs:
             if isinstance(item, tuple):
@@ -225,6 +233,43 @@ class OutputSet:
             raise
         return target
 
+    def open_rows(
+        self,
+        path: str | os.PathLike,
+        shape: tuple[int, ...],
+        *,
+        bit_depth: int = 8,
+        dtype: np.dtype | type | None = None,
+    ) -> StagedRows:
+        """Stage an output written band by band (:mod:`texsyn.io.streaming`).
+
+        Parameters
+        ----------
+        path : str or path-like
+            A claimed output: an image (``.png``, ``.tif``, ``.jpg``), or ``.npy`` (then
+            ``dtype`` is the array's).
+        shape : tuple
+            ``(height, width)`` or ``(height, width, channels)`` of the whole output.
+        bit_depth : int
+            Of an image.
+
+        Returns
+        -------
+        StagedRows
+            ``write(rows)`` for each band, top to bottom, then ``close()``; renamed into
+            place with the set at :meth:`commit`, removed with it on any failure.
+        """
+        target = Path(path)
+        tmp = self._temporary(target, False)
+        staged = StagedRows(
+            target,
+            lambda: open_row_writer(tmp, target.suffix.lower(), shape, bit_depth=bit_depth, dtype=dtype),
+            discard=self.discard,
+            closed=self._open_rows.remove,
+        )
+        self._open_rows.append(staged)
+        return staged
+
     def write_image(self, path: str | os.PathLike, image: np.ndarray, *, bit_depth: int = 8) -> Path:
         """Stage a float image in [0, 1] (or uint8/uint16) as PNG, JPEG or TIFF."""
         target = Path(path)
@@ -275,6 +320,8 @@ class OutputSet:
         if self.committed:
             return list(self._staged)
         try:
+            if self._open_rows:
+                raise RuntimeError(f"output '{self._open_rows[0].target}' was not closed before the commit")
             for target in self._staged:
                 what, folder = self._targets[target]
                 self._check_existing(target, what, folder)  # appeared while we worked?
@@ -317,6 +364,9 @@ class OutputSet:
 
     def discard(self) -> None:
         """Remove every temporary of this set (nothing is renamed)."""
+        for rows in self._open_rows:
+            rows.writer.abort()
+        self._open_rows.clear()
         for tmp in self._staged.values():
             remove_path(tmp)
         if not self.committed:

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import functools
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -40,7 +40,7 @@ from ._deprecation import rename_deprecated, warn_deprecated
 from ._memory import pixel_count, planned_exemplar_shape, shape_dims
 from ._params import ParamSpec, read_param_specs
 
-__all__ = ["ParamSpec", "Progress", "SynthesisResult", "TextureSynthesizer"]
+__all__ = ["ParamSpec", "Progress", "RowBand", "SynthesisResult", "TextureSynthesizer"]
 
 
 @dataclass(frozen=True)
@@ -63,6 +63,25 @@ class SynthesisResult:
     image: np.ndarray
     source_map: np.ndarray | None = None
     diagnostics: dict | None = None
+
+
+@dataclass(frozen=True)
+class RowBand:
+    """Consecutive full-width rows of an output, as :meth:`TextureSynthesizer.sample_rows` yields them.
+
+    Attributes
+    ----------
+    top : int
+        Index of the band's first row in the output.
+    image : ndarray of float32, shape (k, W) or (k, W, 3)
+        The rows, as :meth:`TextureSynthesizer.sample` returns them.
+    source_map : ndarray of int32, shape (k, W, 2), or None
+        Their exemplar positions (copy-based methods).
+    """
+
+    top: int
+    image: np.ndarray
+    source_map: np.ndarray | None = None
 
 
 class TextureSynthesizer:
@@ -93,6 +112,9 @@ class TextureSynthesizer:
     learned_params: ClassVar[tuple[str, ...]] = ()
     #: the names of :meth:`fitted_arrays` (``None``: the method stores none)
     fitted_names: ClassVar[re.Pattern[str] | None] = None
+    #: whether :meth:`sample_rows` holds only a working window of the output (the method
+    #: defines ``_sample_rows``); otherwise it yields the whole image as one band
+    streams_rows: ClassVar[bool] = False
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -177,8 +199,23 @@ class TextureSynthesizer:
             terms["working arrays of the output"] = self.bytes_per_pixel * c * pixel_count(output_shape)
         return terms
 
+    def streaming_memory_terms(
+        self, exemplar_shape: tuple[int, ...], output_shape: tuple[int, int]
+    ) -> dict[str, float]:
+        """Named parts of the peak memory of :meth:`sample_rows`, in bytes (``docs/memory.md``).
+
+        For a method that streams (:attr:`streams_rows`) the hook to override: its working
+        window instead of the whole canvas; otherwise :meth:`memory_terms`, since the whole
+        image is made before it is yielded.
+        """
+        return self.memory_terms(exemplar_shape, output_shape)
+
     def estimate_memory(
-        self, exemplar_shape: tuple[int, ...], output_shape: tuple[int, int] | None = None
+        self,
+        exemplar_shape: tuple[int, ...],
+        output_shape: tuple[int, int] | None = None,
+        *,
+        streaming: bool = False,
     ) -> int:
         """Estimated peak memory of fitting, or of sampling, in bytes (``docs/memory.md``).
 
@@ -193,6 +230,9 @@ class TextureSynthesizer:
             ``(H, W)`` or ``(H, W, C)``.
         output_shape : (int, int), optional
             ``None`` estimates :meth:`fit`; a shape estimates sampling that size.
+        streaming : bool
+            Estimate :meth:`sample_rows` (:meth:`streaming_memory_terms`) rather than
+            :meth:`sample`.
 
         Returns
         -------
@@ -200,17 +240,26 @@ class TextureSynthesizer:
         """
         self._check_params()
         out = None if output_shape is None else (int(output_shape[0]), int(output_shape[1]))
-        terms = self.memory_terms(tuple(exemplar_shape), out)
+        if streaming and out is not None:
+            terms = self.streaming_memory_terms(tuple(exemplar_shape), out)
+        else:
+            terms = self.memory_terms(tuple(exemplar_shape), out)
         return int(np.ceil(self._memory_total(terms)))
 
     def check_memory_for(
-        self, exemplar_shape: tuple[int, ...], output_shape: tuple[int, int] | None = None
+        self,
+        exemplar_shape: tuple[int, ...],
+        output_shape: tuple[int, int] | None = None,
+        *,
+        streaming: bool = False,
     ) -> None:
         """Refuse, before any data is read, work that would exceed ``TEXSYN_MEMORY_LIMIT``.
 
         For front doors that know the shapes first (the command line reads an image file's
         header before its pixels): checks fitting an exemplar of ``exemplar_shape`` and, when
         ``output_shape`` is given, sampling that size from it.
+
+        With ``streaming``, the sampling is :meth:`sample_rows`'s (:meth:`streaming_memory_terms`).
 
         Raises
         ------
@@ -220,7 +269,9 @@ class TextureSynthesizer:
         self._check_params()
         self._check_memory(tuple(exemplar_shape))
         if output_shape is not None:
-            self._check_memory(tuple(exemplar_shape), (int(output_shape[0]), int(output_shape[1])))
+            out = (int(output_shape[0]), int(output_shape[1]))
+            terms = self.streaming_memory_terms(tuple(exemplar_shape), out) if streaming else None
+            self._check_memory(tuple(exemplar_shape), out, terms=terms)
 
     def _memory_total(self, terms: dict[str, float]) -> float:
         """:attr:`memory_margin` times the terms, plus 1 MiB of small arrays and objects."""
@@ -394,6 +445,70 @@ class TextureSynthesizer:
         if source is not None:
             source = np.asarray(source, dtype=np.int32)
         return SynthesisResult(image=result, source_map=source, diagnostics=diagnostics)
+
+    @fixed_order
+    def sample_rows(
+        self,
+        shape: tuple[int, int] | None = None,
+        *,
+        rng: None | int | np.random.Generator = None,
+        callback: Callable[[Progress], None] | None = None,
+    ) -> Iterator[RowBand]:
+        """Like :meth:`sample_with_map`, as bands of rows from top to bottom.
+
+        A method that synthesises in raster order (:attr:`streams_rows`: quilting) holds
+        only a working window of the output and yields its rows as they are finished, so
+        that a writer can stream them to a file and any size fits in memory
+        (``docs/performance.md``, "Any size in bounded memory"); the others yield the whole
+        image as one band. The bands put together are :meth:`sample_with_map`'s result for
+        the same ``rng``, byte for byte.
+
+        Parameters
+        ----------
+        shape, rng, callback
+            As in :meth:`sample`.
+
+        Yields
+        ------
+        RowBand
+
+        Raises
+        ------
+        MemoryLimitError
+            Before any work, when the estimate (of the working window, for a method that
+            streams) exceeds the limit (``docs/memory.md``).
+
+        Examples
+        --------
+        >>> import texsyn
+        >>> model = texsyn.make_method("quilting", patch_size=12).fit(texsyn.data.exemplar("brick", size=48))
+        >>> bands = list(model.sample_rows((64, 80), rng=1))
+        >>> [(band.top, band.image.shape[0]) for band in bands][:2]
+        [(0, 10), (10, 10)]
+        >>> bool((np.concatenate([b.image for b in bands]) == model.sample((64, 80), rng=1)).all())
+        True
+        """
+        if not self.streams_rows:
+            result = self.sample_with_map(shape, rng=rng, callback=callback)
+            yield RowBand(0, result.image, result.source_map)
+            return
+        ex = self._require_fitted()
+        out_shape = check_output_shape(default_output_shape(ex.shape) if shape is None else shape)
+        self._check_memory(ex.shape, out_shape, terms=self.streaming_memory_terms(ex.shape, out_shape))
+        top = 0
+        for image, source in self._sample_rows(out_shape, normalize_rng(rng), callback):
+            rows = self._as_output(image)
+            yield RowBand(top, rows, None if source is None else np.asarray(source, dtype=np.int32))
+            top += rows.shape[0]
+
+    def _sample_rows(
+        self,
+        shape: tuple[int, int],
+        rng: np.random.Generator,
+        callback: Callable[[Progress], None] | None,
+    ) -> Iterator[tuple[np.ndarray, np.ndarray | None]]:
+        """The method's synthesis as ``(rows, source_rows)`` bands, top to bottom (:attr:`streams_rows`)."""
+        raise NotImplementedError  # pragma: no cover - only methods that stream define it
 
     def _as_output(self, image: np.ndarray) -> np.ndarray:
         """An image as methods return it: the exemplar's rank, float32 clipped to [0, 1]."""

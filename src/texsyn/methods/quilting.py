@@ -7,9 +7,8 @@ from typing import Annotated
 import numpy as np
 
 from .._validation import Range
-from ..drivers.raster import Block, block_canvas, block_positions, fill_blocks
+from ..drivers.raster import Block, block_canvas, block_positions, fill_block_rows
 from ..errors import InputError
-from ..ops.canvas import crop_to_output
 from ..ops.patches import as_channels
 from ..ops.progress import Reporter
 from ..ops.seams import cut_mask
@@ -58,6 +57,7 @@ class Quilting(TextureSynthesizer):
     summary = "Efros-Freeman image quilting with minimum-error boundary cuts"
     reference = "Efros, Freeman, SIGGRAPH 2001"
     has_source_map = True
+    streams_rows = True
 
     def __init__(
         self,
@@ -104,6 +104,23 @@ class Quilting(TextureSynthesizer):
         terms["output image"] = output_bytes(c, output_shape)
         return terms
 
+    def streaming_memory_terms(self, exemplar_shape, output_shape) -> dict[str, float]:
+        """Exemplar spectra and one block search; a band of one row of blocks, not the canvas.
+
+        :meth:`sample_rows` holds ``patch_size`` rows of the canvas (colours and source map,
+        float64) and the finished rows it yields, as floats, as 8- or 16-bit samples and as
+        filtered PNG scanlines (about 32 bytes a sample): none grows with the output's height
+        (``docs/performance.md``, "Any size in bounded memory").
+        """
+        terms, query = fft_search_terms(exemplar_shape, masks=3, fitting=False)
+        c = shape_dims(exemplar_shape)[2]
+        b = self.patch_size
+        width = float(block_canvas(output_shape, b, b - self._overlap())[1])
+        terms["one block search"] = query
+        terms["band of one row of blocks"] = b * width * (8.0 * (c + 2) + 1.0)
+        terms["finished rows and their encoding"] = b * width * (8.0 * (c + 2) + 32.0 * c)
+        return terms
+
     # ------------------------------------------------------------------ the paper's steps
     def _choose(
         self, block: Block, rng: np.random.Generator, energies: dict | None = None
@@ -122,37 +139,50 @@ class Quilting(TextureSynthesizer):
         ti, tj = divmod(int(cand[rng.integers(cand.size)]), anchor_cols)
         return ti, tj
 
-    def _paste(
-        self, block: Block, corner: tuple[int, int], exemplar: np.ndarray, source: np.ndarray
-    ) -> np.ndarray:
-        """The block joined along the boundary cut (section 2.1, step 3); records its source."""
-        b = self.patch_size
+    def _paste(self, block: Block, corner: tuple[int, int], exemplar: np.ndarray) -> np.ndarray:
+        """The block joined along the boundary cut (section 2.1, step 3).
+
+        The canvas carries the exemplar position of every pixel as two extra channels
+        after the colour ones (exact in float64), so that the cut places both at once.
+        """
+        b, c = self.patch_size, exemplar.shape[2]
         ti, tj = corner
         old = block.values
-        new = exemplar[ti : ti + b, tj : tj + b]
+        new = np.concatenate([exemplar[ti : ti + b, tj : tj + b], self._offsets + (ti, tj)], axis=-1)
         if self.boundary_cut:
-            take = cut_mask(old, new, block.known)
+            take = cut_mask(old[..., :c], new[..., :c], block.known)
         else:
             take = np.ones((b, b), dtype=bool)
-        src = source[block.row : block.row + b, block.col : block.col + b]
-        offsets = np.stack(np.meshgrid(np.arange(b), np.arange(b), indexing="ij"), axis=-1)
-        src[...] = np.where(take[..., None], offsets + (ti, tj), src)
         return np.where(take[..., None], new, old)
 
-    def _sample(self, shape, rng, callback):
+    @property
+    def _offsets(self) -> np.ndarray:
+        b = self.patch_size
+        return np.stack(np.meshgrid(np.arange(b), np.arange(b), indexing="ij"), axis=-1).astype(np.float64)
+
+    def _sample_rows(self, shape, rng, callback):
         ex = as_channels(self.exemplar_)
+        c = ex.shape[2]
         b, o = self.patch_size, self._overlap()
-        canvas_shape = block_canvas(shape, b, b - o)
-        canvas = np.zeros(canvas_shape + (ex.shape[2],))
-        source = np.zeros(canvas_shape + (2,), dtype=np.int32)
         energies: dict = {}  # this call's cache of the search's energy terms
-        fill_blocks(
-            canvas,
+
+        def choose(block: Block) -> tuple[int, int]:
+            return self._choose(
+                Block(block.row, block.col, block.values[..., :c], block.known), rng, energies
+            )
+
+        for rows in fill_block_rows(
+            shape,
+            c + 2,
             block_positions(shape[0], b, b - o),
             block_positions(shape[1], b, b - o),
             b,
-            lambda block: self._choose(block, rng, energies),
-            lambda block, corner: self._paste(block, corner, ex, source),
+            choose,
+            lambda block, corner: self._paste(block, corner, ex),
             reporter=Reporter(callback, "blocks"),
-        )
-        return crop_to_output(canvas, shape), crop_to_output(source, shape)
+        ):
+            yield rows[..., :c], rows[..., c:].astype(np.int32)
+
+    def _sample(self, shape, rng, callback):
+        bands = list(self._sample_rows(shape, rng, callback))
+        return np.concatenate([b[0] for b in bands]), np.concatenate([b[1] for b in bands])
