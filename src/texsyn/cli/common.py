@@ -27,7 +27,7 @@ from ..errors import InputError
 from ..io import OutputSet, check_image_size, max_image_pixels, read_image, read_image_header
 from ..io.arrays import load_npy
 from ..io.writing import ARRAY_FORMATS, WRITE_FORMATS
-from ..ops.canvas import default_output_shape
+from ..ops.canvas import default_output_shape, prepared_exemplar_shape
 from .options import BUILTIN_PREFIX
 
 __all__ = [
@@ -104,19 +104,31 @@ def planned_shape(exemplar: str | None) -> tuple[int, ...] | None:
     return (header.height, header.width) + ((3,) if header.channels >= 3 else ())
 
 
-def check_memory_before_reading(method, exemplar: str | None, output_shape=None, scale=None) -> None:
+def check_memory_before_reading(
+    method,
+    exemplar: str | None,
+    output_shape=None,
+    scale=None,
+    *,
+    streaming: bool = False,
+    preparation: dict | None = None,
+) -> None:
     """Refuse work over ``TEXSYN_MEMORY_LIMIT`` from the file's header, before decoding it
     (``docs/memory.md``); ``scale`` derives the output shape from the exemplar's, and
-    without either the output has the default shape (twice the exemplar)."""
+    without either the output has the default shape (twice the exemplar). ``streaming``:
+    the output is written band by band (:meth:`~texsyn.methods.TextureSynthesizer.sample_rows`);
+    ``preparation``: the keywords of :func:`~texsyn.ops.canvas.prepare_exemplar` applied after reading."""
     planned = planned_shape(exemplar)
     if planned is None:
         return
+    if preparation:
+        planned = prepared_exemplar_shape(planned, **preparation)
     if output_shape is None and scale is None:
         output_shape = default_output_shape(planned)
     elif output_shape is None:
         factor = float(scale)
         output_shape = (max(1, round(planned[0] * factor)), max(1, round(planned[1] * factor)))
-    method.check_memory_for(planned, output_shape)
+    method.check_memory_for(planned, output_shape, streaming=streaming)
 
 
 def draw_seed(seed: int | None) -> tuple[int, bool]:

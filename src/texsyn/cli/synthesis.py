@@ -10,13 +10,14 @@ sidecar all or none. ``modify`` and ``animate`` are in :mod:`~texsyn.cli.modific
 from __future__ import annotations
 
 import click
+import numpy as np
 
 from ..errors import InputError
 from ..io import sidecar_path
 from ..io.writing import JSON_FORMATS
 from ..methods import METHODS, SynthesisResult, get_method, make_method
 from ..ops import position_colors
-from ..ops.canvas import default_output_shape
+from ..ops.canvas import default_output_shape, prepare_exemplar
 from .common import (
     check_memory_before_reading,
     claim_extra,
@@ -66,6 +67,18 @@ __all__ = ["synth"]
     type=click.Path(dir_okay=False),
     help="Also write where each pixel came from (.npy array, or a .png/.tif position-colour picture).",
 )
+@click.option(
+    "--exemplar-crop",
+    type=SIZE,
+    metavar="WIDTHxHEIGHT",
+    help="Use only the central WIDTHxHEIGHT region of EXEMPLAR (a large photo: docs/performance.md).",
+)
+@click.option(
+    "--exemplar-max-side",
+    type=click.IntRange(min=8, max=MAX_SIDE),
+    metavar="N",
+    help="Shrink EXEMPLAR (after --exemplar-crop) so that its longer side is at most N pixels.",
+)
 @bit_depth_option
 @click.option(
     "--flow",
@@ -76,7 +89,20 @@ __all__ = ["synth"]
 @overwrite_option()
 @quiet_option
 def synth(
-    exemplar, output, method, size, scale, seed, params, source_map, bit_depth, flow_file, overwrite, quiet
+    exemplar,
+    output,
+    method,
+    size,
+    scale,
+    seed,
+    params,
+    source_map,
+    exemplar_crop,
+    exemplar_max_side,
+    bit_depth,
+    flow_file,
+    overwrite,
+    quiet,
 ):
     """Synthesise a texture from EXEMPLAR (an image file, or builtin:brick|grass|gravel).
 
@@ -106,8 +132,18 @@ def synth(
     side_path = outputs.claim(sidecar_path(out_path), formats=JSON_FORMATS, what="sidecar")
 
     flow = read_flow(flow_file) if flow_file is not None else None
-    check_memory_before_reading(synthesizer, exemplar, flow.shape[:2] if flow is not None else size, scale)
+    streaming = flow is None and cls.streams_rows
+    preparation = {"crop": exemplar_crop, "max_side": exemplar_max_side}
+    check_memory_before_reading(
+        synthesizer,
+        exemplar,
+        flow.shape[:2] if flow is not None else size,
+        scale,
+        streaming=streaming,
+        preparation=preparation,
+    )
     image, label = load_exemplar(exemplar)
+    image = prepare_exemplar(image, **preparation)
     if flow is not None:
         shape = flow.shape[:2]
     elif size is not None:
@@ -122,28 +158,63 @@ def synth(
     else:
         shape = default_output_shape(image.shape)
     seed, drawn = draw_seed(seed)
+    h, w = shape
+    options = {"size": [w, h], "bit_depth": depth}
+    if exemplar_crop is not None:
+        options["exemplar_crop"] = [exemplar_crop[1], exemplar_crop[0]]
+    if exemplar_max_side is not None:
+        options["exemplar_max_side"] = exemplar_max_side
+    sidecar_args = {
+        "outputs": {"image": out_path, "source_map": map_path, "sidecar": side_path},
+        "inputs": {"exemplar": exemplar or f"{BUILTIN_PREFIX}brick", "flow": flow_file},
+        "method": method,
+        "seed": seed,
+        "options": options,
+    }
     bar = ProgressBar(f"{method}", enabled=not quiet)
     try:
         synthesizer.fit(image)
-        if flow is not None:
-            result = SynthesisResult(synthesizer.synthesize_along(flow, rng=seed, callback=bar))
+        if streaming:  # rows go to the files as the method finishes them (docs/performance.md)
+            with outputs:
+                stream_bands(outputs, synthesizer, shape, seed, bar, image.shape, out_path, map_path, depth)
+                outputs.write_text(
+                    side_path, sidecar_json("synth", params=synthesizer.get_params(), **sidecar_args)
+                )
         else:
-            result = synthesizer.sample_with_map(shape, rng=seed, callback=bar)
+            if flow is not None:
+                result = SynthesisResult(synthesizer.synthesize_along(flow, rng=seed, callback=bar))
+            else:
+                result = synthesizer.sample_with_map(shape, rng=seed, callback=bar)
+            h, w = result.image.shape[:2]
+            options["size"] = [w, h]
+            sidecar = sidecar_json(
+                "synth", params=synthesizer.get_params(), diagnostics=result.diagnostics, **sidecar_args
+            )
+            with outputs:
+                outputs.write_image(out_path, result.image, bit_depth=depth)
+                stage_extra(
+                    outputs, map_path, result.source_map, lambda m: position_colors(m, image.shape[:2])
+                )
+                outputs.write_text(side_path, sidecar)
     finally:
         bar.close()
-    h, w = result.image.shape[:2]
-    sidecar = sidecar_json(
-        "synth",
-        outputs={"image": out_path, "source_map": map_path, "sidecar": side_path},
-        inputs={"exemplar": exemplar or f"{BUILTIN_PREFIX}brick", "flow": flow_file},
-        method=method,
-        params=synthesizer.get_params(),
-        seed=seed,
-        options={"size": [w, h], "bit_depth": depth},
-        diagnostics=result.diagnostics,
-    )
-    with outputs:
-        outputs.write_image(out_path, result.image, bit_depth=depth)
-        stage_extra(outputs, map_path, result.source_map, lambda m: position_colors(m, image.shape[:2]))
-        outputs.write_text(side_path, sidecar)
     done(quiet, seed, drawn, f"wrote {out_path} ({w}x{h}, {method}, from {label}) and {side_path}")
+
+
+def stream_bands(outputs, synthesizer, shape, seed, bar, exemplar_shape, out_path, map_path, depth) -> None:
+    """Write the bands of :meth:`~texsyn.methods.TextureSynthesizer.sample_rows` to the image
+    and source map files as they come: the float output is never held whole."""
+    channels = () if len(exemplar_shape) == 2 else (exemplar_shape[2],)
+    image_rows = outputs.open_rows(out_path, tuple(shape) + channels, bit_depth=depth)
+    map_rows = None
+    if map_path is not None:
+        npy = map_path.suffix.lower() == ".npy"
+        map_rows = outputs.open_rows(map_path, tuple(shape) + ((2,) if npy else (3,)), dtype=np.int32)
+    for band in synthesizer.sample_rows(shape, rng=seed, callback=bar):
+        image_rows.write(band.image)
+        if map_rows is not None:
+            source = band.source_map
+            map_rows.write(source if npy else position_colors(source, exemplar_shape[:2]))
+    image_rows.close()
+    if map_rows is not None:
+        map_rows.close()

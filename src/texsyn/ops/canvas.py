@@ -6,7 +6,9 @@
   (for transforms that halve it down to a fixed coarse grid) and returns
   :func:`crop_to_output` of it (the top-left corner);
 - an input image analysed on such a canvas is extended to it at the bottom and right
-  (:func:`extend_to_canvas`), and the result cropped back.
+  (:func:`extend_to_canvas`), and the result cropped back;
+- a large exemplar is cropped or shrunk before fitting only when asked
+  (:func:`prepare_exemplar`).
 """
 
 from __future__ import annotations
@@ -21,6 +23,8 @@ __all__ = [
     "extend_to_canvas",
     "padded_canvas",
     "power_of_two_canvas",
+    "prepare_exemplar",
+    "prepared_exemplar_shape",
 ]
 
 
@@ -107,3 +111,66 @@ def crop_to_output(canvas: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     (4, 5, 3)
     """
     return canvas[: int(shape[0]), : int(shape[1])]
+
+
+def prepared_exemplar_shape(
+    shape: tuple[int, ...], *, crop: tuple[int, int] | None = None, max_side: int | None = None
+) -> tuple[int, ...]:
+    """The shape :func:`prepare_exemplar` gives an exemplar of ``shape`` (from a file's header).
+
+    Examples
+    --------
+    >>> prepared_exemplar_shape((3000, 4000, 3), max_side=1024)
+    (768, 1024, 3)
+    >>> prepared_exemplar_shape((3000, 4000, 3), crop=(512, 512), max_side=256)
+    (256, 256, 3)
+    """
+    h, w = int(shape[0]), int(shape[1])
+    if crop is not None:
+        h, w = min(h, int(crop[0])), min(w, int(crop[1]))
+    if max_side is not None and max(h, w) > max_side:
+        factor = max_side / max(h, w)
+        h, w = max(1, round(h * factor)), max(1, round(w * factor))
+    return (h, w) + tuple(shape[2:])
+
+
+def prepare_exemplar(
+    image: np.ndarray, *, crop: tuple[int, int] | None = None, max_side: int | None = None
+) -> np.ndarray:
+    """A large exemplar (a phone photo) made workable: its centre cropped, then shrunk.
+
+    The cost of fitting grows with the exemplar (every exemplar patch is a candidate), and a
+    photo's texture is usually many times larger than its patches. ``crop=(height, width)``
+    keeps the central region of that size; ``max_side`` then shrinks the image (area
+    averaging, ``skimage.transform.resize`` with anti-aliasing) so that its longer side is at
+    most that many pixels (``docs/performance.md``, "Large exemplars").
+
+    Parameters
+    ----------
+    image : ndarray, shape (H, W) or (H, W, C)
+    crop : (int, int), optional
+        Height and width of the central region kept (clipped to the image).
+    max_side : int, optional
+        Longest side after shrinking; images already within it are not resized.
+
+    Returns
+    -------
+    ndarray
+        The same image when neither applies; otherwise float values in the input's range.
+
+    Examples
+    --------
+    >>> prepare_exemplar(np.ones((300, 400)), crop=(100, 200), max_side=50).shape
+    (25, 50)
+    """
+    out = np.asarray(image)
+    shape = prepared_exemplar_shape(out.shape, crop=crop, max_side=max_side)
+    if crop is not None:
+        h, w = min(out.shape[0], int(crop[0])), min(out.shape[1], int(crop[1]))
+        top, left = (out.shape[0] - h) // 2, (out.shape[1] - w) // 2
+        out = out[top : top + h, left : left + w]
+    if out.shape[:2] != shape[:2]:
+        from skimage.transform import resize  # loaded only to shrink
+
+        out = resize(out, shape, order=1, anti_aliasing=True, preserve_range=True).astype(np.float32)
+    return out
