@@ -1,151 +1,428 @@
-"""Time every registered method on 128x128 exemplars synthesised to 256x256, grey and colour.
+"""Time, CPU and peak memory of every method, in process and as a whole ``texsyn synth`` process.
 
 Usage::
 
-    python benchmarks/bench_methods.py [--textures DIR] [--repeats N] [--methods NAME ...]
+    python benchmarks/bench_methods.py [--repeats 3] [--methods NAME ...] [--skip-scaling]
+                                       [--scaling-sizes 256 512 1024 2048] [--big]
                                        [--out benchmarks/results.md]
 
-Exemplars are read from ``../shared/textures`` beside the repository by default (or any
-folder of images given with ``--textures``); each is cropped to its top-left 128x128
-square, and its BT.601 luma is used for the grey cases. Times are medians over textures and
-repeats, for ``fit`` and ``sample`` together and for ``sample`` alone. The table is printed
-and written as markdown. Timings belong here, not in the test suite.
+Three parts, written to ``benchmarks/results.md`` with the machine line (issue 20,
+``docs/performance.md``):
+
+1. **Whole process**, 128 -> 256 grey and colour (the top-left 128x128 of Brick-00, its
+   BT.601 luma for grey): ``texsyn synth EXEMPLAR -m METHOD --size 256x256 --seed 0 -q -o
+   out.png`` run ``--repeats`` times; median wall time, CPU time (user + system of the child,
+   every thread) and peak resident set (``wait4``'s ``ru_maxrss``), against issue 20's
+   targets.
+2. **In process**: each case in a fresh interpreter that first runs a small warm-up of the
+   method (imports, numba compilation and cache loading, thread pools: the start-up the
+   first part measures), then ``fit`` + ``sample`` ``--repeats`` times; median wall, CPU, and
+   the peak resident set growth over the warm-up (``VmHWM`` reset through
+   ``/proc/self/clear_refs``). With it, the arithmetic the method needs (a model of its
+   dominant term, :data:`WORK`) over the time it takes: GFLOP/s.
+3. **Scaling**: 128 -> 256 ... 2048 colour in process, one run per size (slow methods stop
+   at the first size over ``--scaling-budget`` seconds), with two log-log plots
+   (``benchmarks/results/time_vs_size.png``, ``memory_vs_size.png``) and the growth per
+   doubling of the side (4 is linear in the pixels).
+
+``--big`` adds ``texsyn synth -m quilting --size 8192x8192`` to a PNG (whole process, peak
+RSS): the output is streamed band by band (``TextureSynthesizer.sample_rows``).
+Timings belong here, not in the test suite.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import math
 import os
-import platform
 import statistics
+import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-import texsyn
-from texsyn.io import read_image
-from texsyn.ops import rgb_to_yuv
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import DEFAULT_TEXTURES, REPO, RESULTS, machine
 
-REPO = Path(__file__).resolve().parents[1]
-DEFAULT_TEXTURES = REPO.parent / "shared" / "textures"
-DEFAULT_FILES = [
-    "gh_tartavel_vistex/Brick-00.png",
-    "gh_tartavel_vistex/Sand-01.png",
-    "gh_tartavel_vistex/Fabric-13.png",
-]
-#: targets of the method issues (seconds, median, fit + sample)
-TARGETS = {
-    ("random_phase", "colour", 512): 0.05,
-    ("quilting", "colour", 256): 0.5,
-    ("heeger_bergen", "colour", 256): 1.5,
-    ("efros_leung", "grey", 256): 20.0,
-    ("mslg", "colour", 256): 5.0,
-    ("lg", "colour", 256): 5.0,
-    ("clg", "colour", 256): 10.0,
-    ("rclg", "colour", 256): 10.0,
-    ("cwt", "grey", 256): 2.0,
-    ("cwt", "colour", 256): 3.0,
-    ("sparse", "colour", 256): 60.0,
-    ("patch_wavelet", "colour", 256): 10.0,
-    ("grouplets", "colour", 256): 10.0,
-    ("grouplets", "grey", 256): 10.0,
-    ("portilla_simoncelli", "grey", 256): 3.0,
-    ("portilla_simoncelli", "colour", 256): 8.0,
+EXEMPLAR = "gh_tartavel_vistex/Brick-00.png"
+
+#: issue 20's targets: whole ``texsyn synth`` process, 128 -> 256, seconds
+PROCESS_TARGETS = {
+    ("quilting", "colour"): 0.45,
+    ("heeger_bergen", "colour"): 0.8,
+    ("portilla_simoncelli", "colour"): 3.0,
+    ("portilla_simoncelli", "grey"): 1.2,
+    ("efros_leung", "colour"): 5.0,
+    ("sparse", "colour"): 15.0,
+    ("wei_levoy", "colour"): 2.0,
+    ("patch_wavelet", "colour"): 2.0,
+    ("grouplets", "colour"): 2.0,
 }
 
+#: small settings of the warm-up run in each child (imports, compilation)
+WARM_SIZE = 48
 
-def load_exemplars(folder: Path, names: list[str] | None) -> list[tuple[str, np.ndarray]]:
-    if names:
-        paths = [folder / n for n in names]
-    else:
-        paths = sorted(p for p in folder.rglob("*") if p.suffix.lower() in (".png", ".jpg", ".tif", ".gif"))
-    out = []
-    for path in paths:
-        img = read_image(path)
-        if img.ndim == 3 and min(img.shape[:2]) >= 128:
-            out.append((path.stem, img[:128, :128]))
-    if not out:
-        raise SystemExit(f"no colour exemplar of at least 128x128 found in {folder}")
-    return out
+#: the in-process worker (``--child``) prints one JSON line per case
+CHILD = "child"
 
 
-def time_case(name: str, exemplar: np.ndarray, size: int, seed: int) -> tuple[float, float]:
+def fft_flops(n: float) -> float:
+    """Floating-point operations of one complex FFT of ``n`` points (``5 n log2 n``)."""
+    return 5.0 * n * math.log2(max(n, 2.0))
+
+
+def work_model(method: str, ex_shape: tuple[int, ...], out: tuple[int, int]) -> tuple[float, str]:
+    """Floating-point operations of a method's dominant term at default parameters, and what it counts.
+
+    Each is a lower bound of the arithmetic the method's algorithm needs (the cost its paper's
+    loop implies), not a count of what the code does: the ratio to the time taken says how
+    close the implementation runs to the machine.
+    """
+    h, w = ex_shape[:2]
+    c = 1 if len(ex_shape) == 2 else ex_shape[2]
+    pixels = float(out[0] * out[1])
+    if method == "efros_leung":
+        window, windows = 15, float((h - 14) * (w - 14))
+        return (
+            3.0 * pixels * windows * window * window * c,
+            "masked SSD of every output pixel's window with every exemplar window",
+        )
+    if method == "quilting":
+        b, step = 32, 27
+        blocks = math.ceil(out[0] / step) * math.ceil(out[1] / step)
+        spectrum = float((h + b) * (w + b))
+        return blocks * (c + 2) * 2 * fft_flops(
+            spectrum
+        ), "per block, FFT correlations of the overlap with the exemplar"
+    if method in ("heeger_bergen", "portilla_simoncelli"):
+        iterations, bands = (5, 4 * 4 + 2) if method == "heeger_bergen" else (50, 4 * 4 * 2 + 2)
+        return iterations * c * 2 * bands * fft_flops(
+            pixels
+        ), "per iteration, forward and inverse FFT of every band"
+    if method == "random_phase":
+        return 2 * c * fft_flops(pixels), "one FFT and one inverse FFT per channel"
+    if method in ("lg", "clg", "rclg", "mslg"):
+        patch, neighbours = 10, 50
+        patches = float((h - patch + 1) * (w - patch + 1))
+        blocks = pixels / (patch // 2) ** 2
+        return blocks * patches * patch * patch * c * 3.0 + blocks * neighbours * (patch * patch * c) ** 2, (
+            "nearest patches of every block, then a Gaussian of its neighbours"
+        )
+    if method == "wei_levoy":
+        neighbourhood, levels = 12 * c, 4
+        return 3.0 * pixels * (4.0 / 3.0) * h * w * neighbourhood * 2, (
+            f"exact search of every pixel's causal neighbourhood over {levels} levels"
+        )
+    if method == "cwt":
+        return (
+            3.0 * pixels * h * w * 12 * c / 16.0,
+            "nearest windows at the coarsest level, coherent candidates above",
+        )
+    if method == "patch_wavelet":
+        return (
+            2.0 * pixels * h * w * 8 * 8 * c / 16.0,
+            "nearest exemplar patches of the output's patches at every level",
+        )
+    if method == "sparse":
+        atoms, patch, sparsity = 384, 12, 4
+        return (
+            2.0 * pixels * atoms * patch * patch * c * sparsity * 10,
+            "OMP of every patch on the dictionary, 10 rounds",
+        )
+    if method == "grouplets":
+        return 10 * 20.0 * pixels * c * 6, "grouplet transform and histogram matching, 10 iterations"
+    return float("nan"), ""
+
+
+# ---------------------------------------------------------------------------- the exemplar
+def exemplar(textures: Path, kind: str) -> np.ndarray:
+    import texsyn.io
+
+    image = texsyn.io.read_image(textures / EXEMPLAR)[:128, :128]
+    if kind == "grey":
+        from texsyn.ops import rgb_to_yuv
+
+        image = np.clip(rgb_to_yuv(image)[..., 0], 0, 1).astype(np.float32)
+    return image
+
+
+# ---------------------------------------------------------------------------- in process
+def run_child(
+    method: str, kind: str, sizes: list[int], repeats: int, textures: Path, budget: float
+) -> list[dict]:
+    """One fresh interpreter: warm up ``method``, then time each size (``--child``)."""
+    cmd = [
+        sys.executable,
+        __file__,
+        "--child",
+        method,
+        kind,
+        ",".join(map(str, sizes)),
+        str(repeats),
+        str(textures),
+    ]
+    cmd.append(str(budget))
+    done = subprocess.run(cmd, capture_output=True, text=True, check=False)
+    if done.returncode != 0:
+        print(done.stderr[-2000:], file=sys.stderr)
+        return []
+    return [json.loads(line) for line in done.stdout.splitlines() if line.startswith("{")]
+
+
+def _peak_reset() -> None:
+    with open("/proc/self/clear_refs", "w") as fh:
+        fh.write("5")
+
+
+def _status_kib(field: str) -> int:
+    with open("/proc/self/status") as fh:
+        for line in fh:
+            if line.startswith(field + ":"):
+                return int(line.split()[1])
+    return 0
+
+
+def child_main(method: str, kind: str, sizes: str, repeats: str, textures: str, budget: str) -> int:
+    import texsyn
+
+    image = exemplar(Path(textures), kind)
+    texsyn.make_method(method).fit(image[:WARM_SIZE, :WARM_SIZE]).sample((WARM_SIZE, WARM_SIZE), rng=0)
+    for size in (int(s) for s in sizes.split(",")):
+        walls, cpus, peaks = [], [], []
+        for r in range(int(repeats)):
+            base = _status_kib("VmRSS")
+            _peak_reset()
+            w0, c0 = time.perf_counter(), time.process_time()
+            model = texsyn.make_method(method).fit(image)
+            w1 = time.perf_counter()
+            model.sample((size, size), rng=r)
+            w2, c2 = time.perf_counter(), time.process_time()
+            walls.append((w2 - w0, w2 - w1))
+            cpus.append(c2 - c0)
+            peaks.append(max(0, _status_kib("VmHWM") - base) * 1024.0)
+            if w2 - w0 > 10:
+                break
+        total = statistics.median(t for t, _ in walls)
+        record = {
+            "method": method,
+            "kind": kind,
+            "size": size,
+            "runs": len(walls),
+            "wall": total,
+            "sample": statistics.median(s for _, s in walls),
+            "cpu": statistics.median(cpus),
+            "peak": statistics.median(peaks),
+            "estimate": float(texsyn.make_method(method).estimate_memory(image.shape, (size, size))),
+        }
+        print(json.dumps(record), flush=True)
+        if total > float(budget):
+            break
+    return 0
+
+
+# ---------------------------------------------------------------------------- whole process
+def time_process(args: list[str]) -> tuple[float, float, float]:
+    """Wall, CPU (user + system, all threads) and peak RSS (bytes) of one child process."""
     start = time.perf_counter()
-    method = texsyn.make_method(name).fit(exemplar)
-    fitted = time.perf_counter()
-    method.sample((size, size), rng=seed)
-    end = time.perf_counter()
-    return end - start, end - fitted
+    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - start
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    if proc.returncode != 0:
+        raise RuntimeError(
+            f"{' '.join(args)} failed: {proc.stderr.read().decode()[-500:] if proc.stderr else ''}"
+        )
+    return wall, usage.ru_utime + usage.ru_stime, usage.ru_maxrss * 1024.0
+
+
+def process_case(method: str, kind: str, repeats: int, textures: Path, folder: Path) -> dict:
+    import texsyn.io
+
+    source = folder / f"exemplar_{kind}.png"
+    if not source.exists():
+        texsyn.io.write_image(source, exemplar(textures, kind))
+    texsyn_exe = str(Path(sys.executable).with_name("texsyn"))
+    cmd = [texsyn_exe, "synth", str(source), "-m", method, "--size", "256x256", "--seed", "0", "-q"]
+    cmd += ["--overwrite", "-o", str(folder / "out.png")]
+    time_process(cmd)  # numba's cache written by a first run is not what a user's run pays
+    runs = [time_process(cmd) for _ in range(repeats)]
+    return {
+        "method": method,
+        "kind": kind,
+        "wall": statistics.median(r[0] for r in runs),
+        "cpu": statistics.median(r[1] for r in runs),
+        "peak": statistics.median(r[2] for r in runs),
+        "runs": repeats,
+    }
+
+
+# ---------------------------------------------------------------------------- report
+def mib(x: float) -> str:
+    return f"{x / 2**20:.0f}"
+
+
+def plot(records: list[dict], key: str, ylabel: str, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 5))
+    for method in sorted({r["method"] for r in records}):
+        rows = sorted((r["size"], r[key]) for r in records if r["method"] == method and r[key] > 0)
+        if rows:
+            ax.plot([s for s, _ in rows], [v for _, v in rows], marker="o", label=method)
+    sizes = sorted({r["size"] for r in records})
+    ax.set_xscale("log", base=2)
+    ax.set_yscale("log")
+    ax.set_xticks(sizes, [str(s) for s in sizes])
+    ax.set_xlabel("output side (pixels), from a 128x128 colour exemplar")
+    ax.set_ylabel(ylabel)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7, ncol=2)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def growth(records: list[dict], method: str, key: str) -> str:
+    rows = sorted((r["size"], r[key]) for r in records if r["method"] == method)
+    factors = [b / a for (_, a), (_, b) in zip(rows, rows[1:]) if a > 0]
+    return ", ".join(f"{f:.1f}" for f in factors) if factors else ""
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--textures", type=Path, default=DEFAULT_TEXTURES)
-    parser.add_argument(
-        "--files", nargs="*", default=None, help="files inside --textures (default: three VisTex crops)"
+    if argv is None and len(sys.argv) > 1 and sys.argv[1] == "--child":
+        return child_main(*sys.argv[2:8])
+    import texsyn
+
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--textures", type=Path, default=DEFAULT_TEXTURES)
+    p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--methods", nargs="*", default=list(texsyn.METHODS))
+    p.add_argument("--skip-process", action="store_true")
+    p.add_argument("--skip-scaling", action="store_true")
+    p.add_argument("--scaling-sizes", type=int, nargs="*", default=[256, 512, 1024, 2048])
+    p.add_argument(
+        "--scaling-budget", type=float, default=60.0, help="stop a method's scaling after a run this long"
     )
-    parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--methods", nargs="*", default=sorted(texsyn.METHODS))
-    parser.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results.md")
-    args = parser.parse_args(argv)
-
-    files = (
-        args.files
-        if args.files is not None
-        else (DEFAULT_FILES if args.textures == DEFAULT_TEXTURES else None)
-    )
-    exemplars = load_exemplars(args.textures, files)
-    cases = [(m, kind, 256) for m in args.methods for kind in ("grey", "colour")]
-    if "random_phase" in args.methods:
-        cases.append(("random_phase", "colour", 512))
-
-    # warm-up: compile numba kernels and import lazily loaded modules outside the timings
-    warm = exemplars[0][1][:64, :64]
-    for m in args.methods:
-        for image in (warm, np.clip(rgb_to_yuv(warm)[..., 0], 0, 1)):
-            texsyn.make_method(m).fit(image).sample((24, 24), rng=0)
-
-    rows = []
-    for name, kind, size in cases:
-        totals, samples = [], []
-        repeats = args.repeats
-        for _label, ex in exemplars:
-            image = ex if kind == "colour" else np.clip(rgb_to_yuv(ex)[..., 0], 0, 1)
-            for r in range(repeats):
-                total, sample = time_case(name, image, size, seed=r)
-                totals.append(total)
-                samples.append(sample)
-                if total > 10 and r == 0:
-                    break  # slow methods: one run per exemplar is enough
-        target = TARGETS.get((name, kind, size))
-        median = statistics.median(totals)
-        verdict = "" if target is None else ("yes" if median < target else "**no**")
-        rows.append(
-            (name, kind, f"128 -> {size}", median, statistics.median(samples), len(totals), target, verdict)
-        )
-        print(
-            f"{name:15s} {kind:6s} {size:4d}  total {median:8.3f} s  sample {statistics.median(samples):8.3f} s",
-            flush=True,
-        )
+    p.add_argument("--big", action="store_true", help="also quilting 8192x8192 to a PNG (streamed)")
+    p.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results.md")
+    args = p.parse_args(argv)
 
     lines = [
-        "# texsyn method timings",
+        "# texsyn method timings and memory",
         "",
-        f"Exemplars: {', '.join(label for label, _ in exemplars)} (top-left 128x128 crops; grey = BT.601 luma).",
-        f"Machine: {platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}, "
-        f"numpy {np.__version__}, texsyn {texsyn.__version__}. Default parameters, medians over "
-        f"exemplars x repeats (up to {args.repeats}).",
+        machine() + f" Exemplar: top-left 128x128 of {EXEMPLAR}",
         "",
-        "| method | image | size | fit + sample (s) | sample (s) | runs | target (s) | meets target |",
-        "|---|---|---|---:|---:|---:|---:|---|",
     ]
-    for name, kind, size, total, sample, runs, target, verdict in rows:
-        tgt = "" if target is None else f"{target:g}"
-        lines.append(
-            f"| {name} | {kind} | {size} | {total:.3f} | {sample:.3f} | {runs} | {tgt} | {verdict} |"
-        )
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        if not args.skip_process:
+            lines += [
+                "## Whole `texsyn synth` process, 128 -> 256 (issue 20's targets)",
+                "",
+                f"Median of {args.repeats} runs after one unmeasured run; CPU = user + system of every thread.",
+                "",
+                "| method | image | wall (s) | CPU (s) | peak RSS (MiB) | target (s) | met |",
+                "|---|---|---:|---:|---:|---:|---|",
+            ]
+            for method in args.methods:
+                for kind in ("grey", "colour"):
+                    r = process_case(method, kind, args.repeats, args.textures, folder)
+                    target = PROCESS_TARGETS.get((method, kind))
+                    met = "" if target is None else ("yes" if r["wall"] <= target else "**no**")
+                    tgt = "" if target is None else f"{target:g}"
+                    lines.append(
+                        f"| {method} | {kind} | {r['wall']:.2f} | {r['cpu']:.2f} | {mib(r['peak'])} | {tgt} | {met} |"
+                    )
+                    print(lines[-1], flush=True)
+            lines.append("")
+
+        lines += [
+            "## In process, 128 -> 256 (after a warm-up: imports and compilation not counted)",
+            "",
+            "Peak = growth of the resident set over the warm-up; the estimate is `estimate_memory` "
+            "(with its 1.25 margin). GFLOP/s = the dominant arithmetic of the method's algorithm "
+            "(`WORK` model in this script) over fit + sample.",
+            "",
+            "| method | image | fit + sample (s) | sample (s) | CPU (s) | peak (MiB) | estimate (MiB) | GFLOP/s | work counted |",
+            "|---|---|---:|---:|---:|---:|---:|---:|---|",
+        ]
+        for method in args.methods:
+            for kind in ("grey", "colour"):
+                for r in run_child(method, kind, [256], args.repeats, args.textures, 1e9):
+                    shape = (128, 128) if kind == "grey" else (128, 128, 3)
+                    flops, what = work_model(method, shape, (256, 256))
+                    rate = "" if math.isnan(flops) else f"{flops / r['wall'] / 1e9:.1f}"
+                    lines.append(
+                        f"| {method} | {kind} | {r['wall']:.3f} | {r['sample']:.3f} | {r['cpu']:.2f} | "
+                        f"{mib(r['peak'])} | {mib(r['estimate'])} | {rate} | {what} |"
+                    )
+                    print(lines[-1], flush=True)
+        lines.append("")
+
+        if not args.skip_scaling:
+            records: list[dict] = []
+            for method in args.methods:
+                got = run_child(method, "colour", args.scaling_sizes, 1, args.textures, args.scaling_budget)
+                records += got
+                print(method, [(r["size"], round(r["wall"], 2), mib(r["peak"])) for r in got], flush=True)
+            plot(records, "wall", "fit + sample (s)", RESULTS / "time_vs_size.png")
+            plot(records, "peak", "peak resident set growth (bytes)", RESULTS / "memory_vs_size.png")
+            lines += [
+                "## Scaling, 128 -> N colour, in process (one run per size)",
+                "",
+                "![time vs size](results/time_vs_size.png) ![memory vs size](results/memory_vs_size.png)",
+                "",
+                "Growth per doubling of the side: 4 is linear in the output's pixels.",
+                "",
+                "| method | "
+                + " | ".join(f"{s} (s)" for s in args.scaling_sizes)
+                + " | time growth | memory growth |",
+                "|---|" + "---:|" * len(args.scaling_sizes) + "---|---|",
+            ]
+            for method in args.methods:
+                by_size = {r["size"]: r for r in records if r["method"] == method}
+                cells = [f"{by_size[s]['wall']:.2f}" if s in by_size else "" for s in args.scaling_sizes]
+                lines.append(
+                    f"| {method} | " + " | ".join(cells) + f" | {growth(records, method, 'wall')} | "
+                    f"{growth(records, method, 'peak')} |"
+                )
+            lines.append("")
+
+        if args.big:
+            source = folder / "exemplar_colour.png"
+            if not source.exists():
+                texsyn.io.write_image(source, exemplar(args.textures, "colour"))
+            texsyn_exe = str(Path(sys.executable).with_name("texsyn"))
+            cmd = [
+                texsyn_exe,
+                "synth",
+                str(source),
+                "-m",
+                "quilting",
+                "--size",
+                "8192x8192",
+                "--seed",
+                "0",
+                "-q",
+            ]
+            wall, cpu, peak = time_process([*cmd, "-o", str(folder / "big.png")])
+            lines += [
+                "## 8192 x 8192 quilting to a PNG, whole process (streamed)",
+                "",
+                f"Wall {wall:.1f} s, CPU {cpu:.1f} s, peak RSS {mib(peak)} MiB (the float32 canvas alone "
+                f"would be {8192 * 8192 * 3 * 4 / 2**20:.0f} MiB).",
+                "",
+            ]
+            print(lines[-2], flush=True)
+
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text("\n".join(lines) + "\n")
     print(f"\nwrote {args.out}")
