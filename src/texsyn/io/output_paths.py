@@ -39,6 +39,7 @@ __all__ = [
     "check_not_input",
     "check_output_path",
     "current_umask",
+    "fsync_entry",
     "fsync_path",
     "inside",
     "remove_path",
@@ -160,6 +161,12 @@ def fsync_path(path: Path) -> None:
         for entry in os.scandir(path):
             if entry.is_file(follow_symlinks=False):
                 fsync_path(Path(entry.path))
+    fsync_entry(path)
+
+
+def fsync_entry(path: Path) -> None:
+    """Flush one file, or one folder's entries (the names renamed into it), but not the
+    other files of the folder."""
     fd = os.open(path, os.O_RDONLY)
     try:
         os.fsync(fd)

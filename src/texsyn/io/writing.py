@@ -52,6 +52,7 @@ from .output_paths import (
     check_not_input,
     check_output_path,
     current_umask,
+    fsync_entry,
     fsync_path,
     inside,
     remove_path,
@@ -355,8 +356,8 @@ class OutputSet:
             if backup is not None:
                 remove_path(backup)
         for parent in {t.parent for t in self._staged}:
-            try:
-                fsync_path(parent)
+            try:  # the renames; the folder's other files are not ours to flush
+                fsync_entry(parent)
             except OSError:
                 pass
         self.committed = True
