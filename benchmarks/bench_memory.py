@@ -66,6 +66,9 @@ CONFIGS = [
     ("portilla_simoncelli", {"n_iterations": 5}, 128, True, (256, 256)),
     ("portilla_simoncelli", {"n_iterations": 5}, 256, False, (512, 512)),
 ]
+#: configurations run through ``sample_rows`` (the rows consumed and dropped, as a writer would)
+#: against ``estimate_memory(..., streaming=True)``
+STREAMED_CONFIGS = [("quilting", {}, 128, True, (2048, 2048)), ("quilting", {}, 128, False, (1024, 4096))]
 #: texsyn.modify's work: (exemplar side, colour, texture (height, width))
 MODIFY_CONFIGS = [(64, True, (192, 192)), (64, True, (333, 77)), (128, False, (256, 256))]
 
@@ -120,7 +123,13 @@ def measure(spec: dict) -> dict:
     method = texsyn.make_method(method_name, **params)
     texture = texsyn.data.exemplar("gravel", size=None)[: shape[0], : shape[1]] if modify else None
 
+    streaming = bool(spec.get("streaming"))
+
     def second_step(fitted):
+        if streaming:
+            for _ in fitted.sample_rows(shape, rng=0):
+                pass
+            return None
         return fitted.modify(texture, 0.2) if modify else fitted.sample(shape, rng=0)
 
     # warm-up: a small exemplar and an output larger than it, so that every code path runs
@@ -134,7 +143,7 @@ def measure(spec: dict) -> dict:
     if modify:
         run_estimate = method.estimate_modify_memory(exemplar.shape, texture.shape)
     else:
-        run_estimate = method.estimate_memory(exemplar.shape, shape)
+        run_estimate = method.estimate_memory(exemplar.shape, shape, streaming=streaming)
 
     # 1. untraced: growth of the resident set over its level before the fit
     before = _reset_peak()
@@ -187,6 +196,8 @@ def row(r: dict) -> str:
     from the fit).
     """
     params = ", ".join(f"{k}={v}" for k, v in r["params"].items()) or "defaults"
+    if r.get("streaming"):
+        params += " (streamed rows)"
     ex = f"{r['side']}x{r['side']}{'x3' if r['colour'] else ''}"
     out = f"{r['shape'][1]}x{r['shape'][0]}"
     fit_measured = max(r["fit_traced"], r["rss_fit"])
@@ -216,6 +227,10 @@ def main(argv: list[str] | None = None) -> int:
     specs = [
         {"method": m, "params": prm, "side": side, "colour": colour, "shape": list(shape)}
         for m, prm, side, colour, shape in CONFIGS
+    ]
+    specs += [
+        {"method": m, "params": prm, "side": side, "colour": colour, "shape": list(shape), "streaming": True}
+        for m, prm, side, colour, shape in STREAMED_CONFIGS
     ]
     specs += [
         {"method": "modify", "params": {}, "side": side, "colour": colour, "shape": list(shape)}

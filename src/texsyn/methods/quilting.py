@@ -184,5 +184,12 @@ class Quilting(TextureSynthesizer):
             yield rows[..., :c], rows[..., c:].astype(np.int32)
 
     def _sample(self, shape, rng, callback):
-        bands = list(self._sample_rows(shape, rng, callback))
-        return np.concatenate([b[0] for b in bands]), np.concatenate([b[1] for b in bands])
+        c = as_channels(self.exemplar_).shape[2]
+        image = np.empty(tuple(shape) + (c,))
+        source = np.empty(tuple(shape) + (2,), dtype=np.int32)
+        top = 0
+        for rows, rows_source in self._sample_rows(shape, rng, callback):
+            image[top : top + rows.shape[0]] = rows
+            source[top : top + rows.shape[0]] = rows_source
+            top += rows.shape[0]
+        return image, source
