@@ -28,12 +28,14 @@ import numpy as np
 
 from .._validation import OneOf, Range, as_exemplar
 from ..drivers.alternating import alternate_projections
-from ..models.portilla import PSStatistics, parent_features, ps_statistics, statistics_distance
+from ..models.portilla import PSStatistics, parent_rows, ps_statistics, statistics_distance, upsampled_parent
 from ..models.portilla_projections import (
+    centred_magnitudes,
     impose_lowpass_statistics,
-    impose_magnitude_statistics,
-    impose_parent_regression,
     impose_pixel_statistics,
+    magnitude_ratio,
+    parent_regression_rows,
+    real_part_of_product,
     shrink_highpass,
     shrink_image_highpass,
 )
@@ -75,19 +77,27 @@ def project_statistics(
         lags,
     )
     for s in range(n_scales - 1, -1, -1):
-        parent_mags, parent_reals = parent_features(pyramid, spectra, lows, s)
-        band = impose_magnitude_statistics(bands[s], target, s, parent_mags, lags)
-        if s < n_scales - 1:
-            c, k = band.shape[:2]
-            n = band.shape[-1] * band.shape[-2]
-            reals = impose_parent_regression(
-                band.real.reshape(c * k, n).T, parent_reals, target.real_parent[s]
-            )
-            real = reals.T.reshape(band.shape)
+        band = bands[s]
+        c, k, h, w = band.shape
+        ck = c * k
+        if s == n_scales - 1:  # no parent scale: the magnitudes' own covariance, no phase regression
+            current, mags = centred_magnitudes(band)
+            ratio = magnitude_ratio(current, mags, None, target, s, lags)
+            real = real_part_of_product(band, ratio, np.empty(band.shape, dtype=np.float32))
         else:
-            real = band.real
+            # rows of the two regressions (section 4), filled in place: the band's centred
+            # magnitudes and its parents' (double precision), the band's real parts and the
+            # phase-doubled parents (single precision)
+            magnitude_rows = np.empty((2 * ck, h * w))
+            real_rows = np.empty((3 * ck, h * w), dtype=np.float32)
+            parent_rows(upsampled_parent(pyramid, spectra, s), magnitude_rows[ck:], real_rows[ck:])
+            current, _ = centred_magnitudes(band, magnitude_rows[:ck].reshape(band.shape))
+            ratio = magnitude_ratio(current, None, magnitude_rows, target, s, lags)
+            real_part_of_product(band, ratio, real_rows[:ck].reshape(band.shape))
+            real = parent_regression_rows(real_rows, ck, target.real_parent[s]).reshape(band.shape)
         real_spectra = pyramid.fft(real)
-        bands[s], spectra[s] = pyramid.analytic(real, s, real_spectra=real_spectra)
+        if s > 0:  # the parents of the next finer scale (the complex bands themselves are not needed)
+            spectra[s] = real_spectra * pyramid.half_planes[s]
         image = pyramid.reconstruct_level(image, real, s, real_spectra=real_spectra)
         image = impose_lowpass_statistics(
             image, target.low_autocorr[s], target.low_skew_kurt[:, s], pixel_var, lags

@@ -16,11 +16,15 @@ import functools
 import numpy as np
 import scipy.fft as sfft
 
+from ..ops.linalg import worker_count
 from .portilla import PSStatistics
 
 __all__ = [
     "adjust_correlation",
     "adjust_cross_correlation",
+    "adjust_cross_correlation_rows",
+    "centred_magnitudes",
+    "filter_autocorrelation",
     "fit_window",
     "impose_autocorrelation",
     "impose_kurtosis",
@@ -29,6 +33,9 @@ __all__ = [
     "impose_parent_regression",
     "impose_pixel_statistics",
     "impose_skewness",
+    "magnitude_ratio",
+    "parent_regression_rows",
+    "real_part_of_product",
     "shrink_highpass",
     "shrink_image_highpass",
 ]
@@ -41,15 +48,28 @@ def impose_autocorrelation(x: np.ndarray, target: np.ndarray) -> np.ndarray:
     ``(c_x * c_h)(t) = target(t)`` on the window, then multiplies the spectrum of ``x`` by
     ``sqrt(|FT c_h|)``. Batched: ``x`` is ``(..., h, w)`` and ``target`` ``(..., a, a)``.
     """
-    x = np.asarray(x, dtype=np.float64)
+    return np.asarray(filter_autocorrelation(np.asarray(x, dtype=np.float64), target), dtype=np.float64)
+
+
+def filter_autocorrelation(x: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """:func:`impose_autocorrelation` without the final conversion to double precision.
+
+    With a window wider than one pixel the filtering runs in single precision (``x`` is
+    rounded to it) and its result is returned as such; the synthesis adds it to double
+    precision values, which widens it exactly as the conversion would.
+    """
     h, w = x.shape[-2:]
     batch = x.shape[:-2]
     lag = (target.shape[-1] - 1) // 2
     if lag == 0:
+        x = np.asarray(x, dtype=np.float64)
         cur = np.mean(x**2, axis=(-2, -1), keepdims=True)
         return x * np.sqrt(target[..., :1, :1] / np.where(cur > 0, cur, 1.0))
-    spec = sfft.rfft2(x.astype(np.float32))
-    cx = sfft.irfft2(spec.real**2 + spec.imag**2, s=(h, w)).astype(np.float64) / (h * w)
+    workers = worker_count()
+    spec = sfft.rfft2(np.asarray(x, dtype=np.float32), workers=workers)
+    power = np.square(spec.real)
+    power += np.square(spec.imag)
+    cx = sfft.irfft2(power, s=(h, w), workers=workers).astype(np.float64) / (h * w)
     half = _half_offsets(lag)
     diff = half[:, None, :] - half[None, :, :]
     summ = half[:, None, :] + half[None, :, :]
@@ -66,11 +86,30 @@ def impose_autocorrelation(x: np.ndarray, target: np.ndarray) -> np.ndarray:
                 for ai, bi in zip(a.reshape((-1,) + a.shape[-2:]), b.reshape(-1, b.shape[-1]))
             ]
         ).reshape(b.shape)
-    ch = np.zeros(batch + (h, w))
-    ch[..., half[:, 0] % h, half[:, 1] % w] = coef
-    ch[..., -half[:, 0] % h, -half[:, 1] % w] = coef
-    gain = np.sqrt(np.abs(sfft.rfft2(ch.astype(np.float32)).real))
-    return sfft.irfft2(spec * gain, s=(h, w)).astype(np.float64)
+    gain = np.sqrt(np.abs(_symmetric_filter_spectrum(coef, half, batch, h, w).real))
+    spec *= gain
+    return sfft.irfft2(spec, s=(h, w), workers=workers)
+
+
+def _symmetric_filter_spectrum(
+    coef: np.ndarray, half: np.ndarray, batch: tuple, h: int, w: int
+) -> np.ndarray:
+    """``rfft2`` of the single-precision ``(h, w)`` filters with ``coef`` at the lags ``+/- half``.
+
+    The filters are zero outside the ``2 lag + 1`` rows of their window, so the first pass
+    of ``rfft2`` (real transforms along the rows) runs on those rows only; the second (along
+    the columns) is ``rfft2``'s own. The transform of a zero row is zero, so the result is
+    ``rfft2``'s but for the sign of zeros, which the gain's ``abs`` removes.
+    """
+    rows_pos, rows_neg = half[:, 0] % h, -half[:, 0] % h
+    rows = np.unique(np.concatenate([rows_pos, rows_neg]))
+    ch = np.zeros(batch + (rows.size, w), dtype=np.float32)  # the used rows only
+    ch[..., np.searchsorted(rows, rows_pos), half[:, 1] % w] = coef
+    ch[..., np.searchsorted(rows, rows_neg), -half[:, 1] % w] = coef
+    workers = worker_count()
+    spec = np.zeros(batch + (h, w // 2 + 1), dtype=np.complex64)
+    spec[..., rows, :] = sfft.rfft(ch, axis=-1, workers=workers)
+    return sfft.fft(spec, axis=-2, overwrite_x=True, workers=workers)
 
 
 @functools.cache
@@ -99,6 +138,94 @@ def is_flat(variance: float, mean: float) -> bool:
     return not variance > FLAT_VARIANCE * max(1.0, float(mean) ** 2)
 
 
+# Polynomials in the step ``l`` as coefficient arrays, lowest degree first. These helpers do
+# the arithmetic of ``numpy.polynomial.Polynomial`` (same trimming of zero leading
+# coefficients, same ``np.convolve`` products, same companion matrix and eigenvalue solver,
+# same identity map of the default domain) without its per-object overhead: the skewness and
+# kurtosis steps run a few thousand times per synthesis, and the objects cost more than the
+# arithmetic. ``tests/test_portilla.py`` checks that the results are the same bits.
+_ZERO, _ONE = np.float64(0.0), np.float64(1.0)  # the default domain's map: off + scl x
+
+
+def _trim(c: np.ndarray) -> np.ndarray:
+    """``c`` without its trailing zero coefficients (at least one kept), as ``polyutils.trimseq``."""
+    if len(c) == 0 or c[-1] != 0:
+        return c
+    for i in range(len(c) - 1, -1, -1):
+        if c[i] != 0:
+            break
+    return c[: i + 1]
+
+
+def _series(c) -> np.ndarray:
+    """A trimmed float64 copy of ``c``, as ``polyutils.as_series([c])[0]``."""
+    return np.array(_trim(np.array(c, ndmin=1, copy=None)), dtype=np.float64, copy=True)
+
+
+def _poly_mul(c1, c2) -> np.ndarray:
+    """``Polynomial(c1) * Polynomial(c2)`` (``polymul``)."""
+    return _trim(np.convolve(_series(c1), _series(c2)))
+
+
+def _poly_sub(c1, c2) -> np.ndarray:
+    """``Polynomial(c1) - Polynomial(c2)`` (``polyutils._sub``)."""
+    c1, c2 = _series(c1), _series(c2)
+    if len(c1) > len(c2):
+        c1[: c2.size] -= c2
+        return _trim(c1)
+    c2 = -c2
+    c2[: c1.size] += c1
+    return _trim(c2)
+
+
+def _poly_pow(c, power: int) -> np.ndarray:
+    """``Polynomial(c) ** power`` for ``power >= 2`` (``polypow``: repeated ``np.convolve``)."""
+    c = _series(c)
+    product = c
+    for _ in range(2, power + 1):
+        product = np.convolve(product, c)
+    return product
+
+
+def _poly_der(c) -> np.ndarray:
+    """``Polynomial(c).deriv()`` (``polyder`` with scale 1)."""
+    c = np.array(c, ndmin=1, copy=True, dtype=np.float64)
+    n = len(c)
+    if n <= 1:
+        return c[:1] * 0
+    c *= _ONE
+    der = np.empty(n - 1)
+    for j in range(n - 1, 0, -1):
+        der[j - 1] = j * c[j]
+    return der
+
+
+def _poly_val(c: np.ndarray, x):
+    """``Polynomial(c)(x)``: the domain's identity map, then Horner's scheme (``polyval``)."""
+    x = _ZERO + _ONE * np.asanyarray(x)
+    c0 = c[-1] + x * 0
+    for i in range(2, len(c) + 1):
+        c0 = c[-i] + c0 * x
+    return c0
+
+
+def _poly_roots(c) -> np.ndarray:
+    """``Polynomial(c).roots()``: eigenvalues of the companion matrix, sorted (``polyroots``)."""
+    c = _series(c)
+    if len(c) < 2:
+        roots = np.array([], dtype=c.dtype)
+    elif len(c) == 2:
+        roots = np.array([-c[0] / c[1]])
+    else:
+        n = len(c) - 1
+        companion = np.zeros((n, n), dtype=c.dtype)
+        companion.reshape(-1)[n :: n + 1] = 1
+        companion[:, -1] -= c[:-1] / c[-1]
+        roots = np.linalg.eigvals(companion)
+        roots.sort()
+    return _ZERO + _ONE * roots
+
+
 def _monotone_interval(num, den, power) -> tuple[float, float]:
     """The interval around ``l = 0`` on which ``num(l) / den(l)^(power/2)`` is monotone.
 
@@ -106,9 +233,12 @@ def _monotone_interval(num, den, power) -> tuple[float, float]:
     there is none): the roots of ``num' den - (power/2) num den'``, the numerator of the
     ratio's derivative.
     """
-    num = np.polynomial.Polynomial(num)
-    den = np.polynomial.Polynomial(den)
-    roots = (num.deriv() * den - (power / 2.0) * num * den.deriv()).roots()
+    num = np.array(num, dtype=np.float64)
+    den = np.array(den, dtype=np.float64)
+    derivative = _poly_sub(
+        _poly_mul(_poly_der(num), den), _poly_mul(_poly_mul([power / 2.0], num), _poly_der(den))
+    )
+    roots = _poly_roots(derivative)
     real = roots[np.abs(roots.imag) < 1e-6 * np.maximum(1.0, np.abs(roots.real))].real
     below, above = real[real < 0], real[real > 0]
     return (below.max() if below.size else -np.inf), (above.min() if above.size else np.inf)
@@ -126,24 +256,24 @@ def _solve_lambda(coeffs_num, coeffs_den, target, power):
     as the reference code saturates an unreachable moment. ``None`` when the target is
     unreachable and the ratio has no extremum.
     """
-    num = np.polynomial.Polynomial(coeffs_num)
-    den = np.polynomial.Polynomial(coeffs_den)
+    num = np.array(coeffs_num, dtype=np.float64)
+    den = np.array(coeffs_den, dtype=np.float64)
     if power == 3:  # skewness: num / den^1.5 = t  ->  num^2 - t^2 den^3 = 0, sign(num) = sign(t)
-        poly = num**2 - target**2 * den**3
+        poly = _poly_sub(_poly_pow(num, 2), _poly_mul([target**2], _poly_pow(den, 3)))
     else:  # kurtosis: num / den^2 = t  ->  num - t den^2 = 0
-        poly = num - target * den**2
-    roots = poly.roots()
+        poly = _poly_sub(num, _poly_mul([target], _poly_pow(den, 2)))
+    roots = _poly_roots(poly)
     real = roots[np.abs(roots.imag) < 1e-6 * np.maximum(1.0, np.abs(roots.real))].real
     if power == 3:
-        real = real[np.sign(num(real)) == np.sign(target)] if target != 0 else real
-    low, high = _monotone_interval(coeffs_num, coeffs_den, power)
+        real = real[np.sign(_poly_val(num, real)) == np.sign(target)] if target != 0 else real
+    low, high = _monotone_interval(num, den, power)
     real = real[(real >= low) & (real <= high)]
     if real.size:
         return real[np.argmin(np.abs(real))]
     ends = np.array([end for end in (low, high) if np.isfinite(end)])
     if ends.size == 0:
         return None
-    return ends[np.argmin(np.abs(num(ends) / den(ends) ** (power / 2.0) - target))]
+    return ends[np.argmin(np.abs(_poly_val(num, ends) / _poly_val(den, ends) ** (power / 2.0) - target))]
 
 
 def impose_skewness(x: np.ndarray, target: float) -> np.ndarray:
@@ -233,8 +363,16 @@ def adjust_cross_correlation(
     The part of ``x`` explained by ``y`` is replaced by the target regression and the
     residual is rescaled to the target residual covariance (clipped to be positive).
     """
-    n, k = x.shape
     rows = np.concatenate([x.T, y.T], axis=0)  # (k + m, N), contiguous rows for BLAS
+    return adjust_cross_correlation_rows(rows, x.shape[1], target, target_xy).T
+
+
+def adjust_cross_correlation_rows(
+    rows: np.ndarray, k: int, target: np.ndarray, target_xy: np.ndarray
+) -> np.ndarray:
+    """:func:`adjust_cross_correlation` on rows: ``rows`` ``(k + m, N)`` holds ``x^T`` then
+    ``y^T`` (double precision, C order); returns the new ``x^T`` ``(k, N)``."""
+    n = rows.shape[1]
     gram = rows @ rows.T / n
     bxx, bxy, byy = gram[:k, :k], gram[:k, k:], gram[k:, k:]
     ibyy = np.linalg.pinv(byy)
@@ -243,7 +381,7 @@ def adjust_cross_correlation(
     desired = target - target_xy @ ibyy @ target_xy.T
     m = _sqrtm(current, inverse=True) @ _sqrtm(desired)
     # (x - y regression) m + y ibyy target_xy^T, with two products of N-column matrices
-    return (m.T @ rows[:k] + (ibyy @ target_xy.T - regression @ m).T @ rows[k:]).T
+    return m.T @ rows[:k] + (ibyy @ target_xy.T - regression @ m).T @ rows[k:]
 
 
 def fit_window(target: np.ndarray, shape: tuple[int, int], lags: int) -> np.ndarray:
@@ -293,8 +431,14 @@ def impose_parent_regression(reals: np.ndarray, parents: np.ndarray, target_xp: 
     """Give every column of ``reals`` (N, k) its target correlation ``target_xp`` (k, m) with
     ``parents`` (N, m), keeping its variance (paper section 4: the real parts against the
     phase-doubled parents; computed in single precision like the synthesis pyramid)."""
-    n, k = reals.shape
     rows = np.concatenate([reals.T, parents.T], axis=0).astype(np.float32)  # (k + m, N)
+    return parent_regression_rows(rows, reals.shape[1], target_xp).T.astype(np.float64)
+
+
+def parent_regression_rows(rows: np.ndarray, k: int, target_xp: np.ndarray) -> np.ndarray:
+    """:func:`impose_parent_regression` on single-precision rows: ``rows`` ``(k + m, N)``
+    holds the reals' transpose then the parents'; returns the new reals' transpose ``(k, N)``."""
+    n = rows.shape[1]
     gram = (rows @ rows.T).astype(np.float64) / n
     own = np.diag(gram)[:k]
     cross = gram[k:, :k]  # (m, k): parents^T reals / n
@@ -305,7 +449,7 @@ def impose_parent_regression(reals: np.ndarray, parents: np.ndarray, target_xp: 
     desired = np.maximum(own - np.einsum("km,mk->k", target_xp, fit), 0.0)
     scale = np.sqrt(desired / np.where(current > 0, current, 1.0))
     mix = (fit - regression * scale).T.astype(np.float32)
-    return (rows[:k] * scale[:, None].astype(np.float32) + mix @ rows[k:]).T.astype(np.float64)
+    return rows[:k] * scale[:, None].astype(np.float32) + mix @ rows[k:]
 
 
 def impose_magnitude_statistics(
@@ -320,19 +464,66 @@ def impose_magnitude_statistics(
     """
     c, k = band.shape[:2]
     n = band.shape[-1] * band.shape[-2]
-    current = np.abs(band)
-    mags = current - current.mean(axis=(-2, -1), keepdims=True)
-    m = mags.reshape(c * k, n).T
     if parent_magnitudes is None:
-        m = adjust_correlation(m, target.magnitude_cross[level])
+        current, mags = centred_magnitudes(band)
+        return band * magnitude_ratio(current, mags, None, target, level, lags)
+    rows = np.empty((c * k + parent_magnitudes.shape[1], n))
+    current, _ = centred_magnitudes(band, rows[: c * k].reshape(band.shape))
+    rows[c * k :] = parent_magnitudes.T
+    return band * magnitude_ratio(current, None, rows, target, level, lags)
+
+
+def centred_magnitudes(band: np.ndarray, out: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """``(|band|, |band| - its mean over each band)``, the second written into ``out`` if given."""
+    current = np.abs(band)
+    mean = current.mean(axis=(-2, -1), keepdims=True)
+    return current, (current - mean if out is None else np.subtract(current, mean, out=out))
+
+
+def magnitude_ratio(
+    current: np.ndarray,
+    mags: np.ndarray | None,
+    rows: np.ndarray | None,
+    target: PSStatistics,
+    level: int,
+    lags: int,
+) -> np.ndarray:
+    """The factor ``new magnitude / |band|`` of :func:`impose_magnitude_statistics` (0 where ``band = 0``).
+
+    ``current`` is ``|band|`` ``(C, K, h, w)``; at the coarsest scale ``mags`` holds its
+    centred magnitudes and ``rows`` is None, elsewhere ``rows`` ``(CK + M, hw)`` holds them
+    (as rows, double precision) followed by the parents' centred magnitudes.
+    """
+    c, k = current.shape[:2]
+    n = current.shape[-1] * current.shape[-2]
+    if rows is None:
+        assert mags is not None
+        m = adjust_correlation(mags.reshape(c * k, n).T, target.magnitude_cross[level]).T
     else:
-        m = adjust_cross_correlation(
-            m, target.magnitude_cross[level], parent_magnitudes, target.magnitude_parent[level]
+        m = adjust_cross_correlation_rows(
+            rows, c * k, target.magnitude_cross[level], target.magnitude_parent[level]
         )
-    mags = m.T.reshape(mags.shape)
-    mags = impose_autocorrelation(mags, fit_window(target.magnitude_autocorr[level], mags.shape[-2:], lags))
-    magnitude = np.maximum(mags + target.magnitude_means[level][..., None, None], 0.0)
-    return band * (magnitude / np.where(current > 0, current, 1.0))
+    window = fit_window(target.magnitude_autocorr[level], current.shape[-2:], lags)
+    filtered = filter_autocorrelation(m.reshape(current.shape), window)
+    ratio = np.add(filtered, target.magnitude_means[level][..., None, None], dtype=np.float64)
+    np.maximum(ratio, 0.0, out=ratio)
+    if current.size and current.min() > 0:
+        return np.divide(ratio, current, out=ratio)
+    return np.divide(ratio, np.where(current > 0, current, 1.0), out=ratio)
+
+
+def real_part_of_product(band: np.ndarray, ratio: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """``(band * ratio).real`` (complex times real) written into ``out``, without the complex product.
+
+    The complex product's real part is ``re ratio - im 0``: the same number as
+    ``re ratio`` except when that is a zero, whose sign the ``- im 0`` may flip; those
+    entries are taken from the complex product itself.
+    """
+    np.multiply(band.real, ratio, out=out)
+    zero = out == 0
+    if zero.any():
+        out[zero] = (band[zero] * ratio[zero]).real
+    return out
 
 
 def shrink_highpass(highpass: np.ndarray, target_variance: np.ndarray) -> np.ndarray:

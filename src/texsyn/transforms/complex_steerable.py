@@ -21,9 +21,31 @@ from __future__ import annotations
 import numpy as np
 import scipy.fft as sfft
 
+from ..ops.linalg import worker_count
 from .steerable import crop_indices, oriented_windows, pyramid_sizes, radial_lowpass
 
 __all__ = ["ComplexSteerablePyramid"]
+
+
+def _runs(indices: np.ndarray) -> list[tuple[slice, slice]]:
+    """The contiguous runs of an index array: ``(slice of the indexed axis, slice of indices)``.
+
+    :func:`~texsyn.transforms.steerable.crop_indices` gives two runs (the non-negative and the
+    negative frequencies): copying them as slices moves the same values as fancy indexing,
+    without its gather.
+
+    Examples
+    --------
+    >>> _runs(np.array([0, 1, 6, 7]))
+    [(slice(0, 2, None), slice(0, 2, None)), (slice(6, 8, None), slice(2, 4, None))]
+    """
+    cuts = np.flatnonzero(np.diff(indices) != 1) + 1
+    starts = np.concatenate([[0], cuts])
+    stops = np.concatenate([cuts, [len(indices)]])
+    return [
+        (slice(int(indices[a]), int(indices[b - 1]) + 1), slice(int(a), int(b)))
+        for a, b in zip(starts, stops)
+    ]
 
 
 class ComplexSteerablePyramid:
@@ -66,6 +88,7 @@ class ComplexSteerablePyramid:
         self.lo0 = radial_lowpass(r0 / 2.0)
         self.hi0 = np.sqrt(np.maximum(1.0 - self.lo0**2, 0.0))
         self.lo, self.real_filters, self.analytic_filters, self.half_planes = [], [], [], []
+        self.conj_real_filters = []  # np.conj(real_filters[s]), kept for reconstruct_level
         for size in self.sizes[: self.n_scales]:
             r, theta = self._polar(size)
             lo = radial_lowpass(r)
@@ -78,6 +101,7 @@ class ComplexSteerablePyramid:
             rd, cd = self.real_dtype, np.result_type(self.real_dtype, np.complex64)
             self.lo.append(lo.astype(rd))
             self.real_filters.append(reals.astype(cd))
+            self.conj_real_filters.append(np.conj(self.real_filters[-1]))
             self.analytic_filters.append(analytic.astype(cd))
             self.half_planes.append(halves.astype(rd))
         self.lo0 = self.lo0.astype(self.real_dtype)
@@ -93,14 +117,19 @@ class ComplexSteerablePyramid:
             self.mid.append(self.lo[level][rows[:, None], cols[None, :]])
 
     def fft(self, x: np.ndarray) -> np.ndarray:
-        """2-D FFT over the last two axes, in the pyramid's precision (``single`` or double)."""
+        """2-D FFT over the last two axes, in the pyramid's precision (``single`` or double).
+
+        The transforms use every CPU of the process (``workers``): each line is transformed
+        by one thread, the same way whichever, so the bytes do not depend on the number of
+        threads (``docs/determinism.md``).
+        """
         x = np.asarray(x)
         dtype = np.result_type(self.real_dtype, np.complex64) if np.iscomplexobj(x) else self.real_dtype
-        return sfft.fft2(x.astype(dtype, copy=False))
+        return sfft.fft2(x.astype(dtype, copy=False), workers=worker_count())
 
     def ifft(self, x: np.ndarray) -> np.ndarray:
         """Inverse 2-D FFT over the last two axes (complex result)."""
-        return sfft.ifft2(x)
+        return sfft.ifft2(x, workers=worker_count())
 
     @staticmethod
     def _polar(shape):
@@ -112,14 +141,22 @@ class ComplexSteerablePyramid:
     def resize_spectrum(spec: np.ndarray, size_from, size_to) -> np.ndarray:
         """Crop or zero-pad a full 2-D spectrum (last two axes), keeping amplitudes."""
         scale = (size_to[0] * size_to[1]) / (size_from[0] * size_from[1])
+        shape = spec.shape[:-2] + tuple(size_to)
         if size_to[0] <= size_from[0]:
-            rows = crop_indices(size_from[0], size_to[0])
-            cols = crop_indices(size_from[1], size_to[1])
-            return spec[..., rows[:, None], cols[None, :]] * scale
-        rows = crop_indices(size_to[0], size_from[0])
-        cols = crop_indices(size_to[1], size_from[1])
-        out = np.zeros(spec.shape[:-2] + tuple(size_to), dtype=complex)
-        out[..., rows[:, None], cols[None, :]] = spec * scale
+            rows = _runs(crop_indices(size_from[0], size_to[0]))
+            cols = _runs(crop_indices(size_from[1], size_to[1]))
+            out = np.empty(shape, dtype=np.result_type(spec.dtype, scale))
+            for fine_r, coarse_r in rows:
+                for fine_c, coarse_c in cols:
+                    np.multiply(spec[..., fine_r, fine_c], scale, out=out[..., coarse_r, coarse_c])
+            return out
+        rows = _runs(crop_indices(size_to[0], size_from[0]))
+        cols = _runs(crop_indices(size_to[1], size_from[1]))
+        out = np.zeros(shape, dtype=complex)
+        for fine_r, coarse_r in rows:
+            for fine_c, coarse_c in cols:
+                # the product in the spectrum's own precision, then widened (as ``spec * scale``)
+                np.multiply(spec[..., coarse_r, coarse_c], scale, out=out[..., fine_r, fine_c])
         return out
 
     def expand(self, image: np.ndarray, level: int) -> np.ndarray:
@@ -166,8 +203,14 @@ class ComplexSteerablePyramid:
         spec = self.resize_spectrum(self.fft(coarser), self.sizes[level + 1], self.sizes[level])
         if real_spectra is None:
             real_spectra = self.fft(real_bands)
-        spec = spec + np.sum(real_spectra * np.conj(self.real_filters[level]), axis=-3)
-        return self.ifft(spec * self.mid[level]).real
+        # np.sum over the orientations, in its order: ((b0 + b1) + b2) + ...
+        filters = self.conj_real_filters[level]
+        total = real_spectra[..., 0, :, :] * filters[0]
+        for b in range(1, filters.shape[0]):
+            total += real_spectra[..., b, :, :] * filters[b]
+        spec += total
+        spec *= self.mid[level]
+        return self.ifft(spec).real
 
     def reconstruct(self, low0: np.ndarray, highpass: np.ndarray) -> np.ndarray:
         """The image from the finest partially reconstructed image and the high-pass residual."""
