@@ -28,14 +28,14 @@ import numpy as np
 
 from .._validation import OneOf, Range, as_exemplar
 from ..drivers.alternating import alternate_projections
-from ..models.portilla import PSStatistics, parent_rows, ps_statistics, statistics_distance, upsampled_parent
+from ..models.portilla import PSStatistics, parent_rows, ps_statistics, statistics_distance
 from ..models.portilla_projections import (
+    adjusted_magnitudes,
     centred_magnitudes,
     impose_lowpass_statistics,
     impose_pixel_statistics,
-    magnitude_ratio,
+    magnitude_real_parts,
     parent_regression_rows,
-    real_part_of_product,
     shrink_highpass,
     shrink_image_highpass,
 )
@@ -82,18 +82,22 @@ def project_statistics(
         ck = c * k
         if s == n_scales - 1:  # no parent scale: the magnitudes' own covariance, no phase regression
             current, mags = centred_magnitudes(band)
-            ratio = magnitude_ratio(current, mags, None, target, s, lags)
-            real = real_part_of_product(band, ratio, np.empty(band.shape, dtype=np.float32))
+            filtered = adjusted_magnitudes(current, mags, None, target, s, lags)
+            real = magnitude_real_parts(
+                band, current, filtered, target.magnitude_means[s], np.empty(band.shape, dtype=np.float32)
+            )
         else:
             # rows of the two regressions (section 4), filled in place: the band's centred
             # magnitudes and its parents' (double precision), the band's real parts and the
             # phase-doubled parents (single precision)
             magnitude_rows = np.empty((2 * ck, h * w))
             real_rows = np.empty((3 * ck, h * w), dtype=np.float32)
-            parent_rows(upsampled_parent(pyramid, spectra, s), magnitude_rows[ck:], real_rows[ck:])
+            parent_rows(pyramid, spectra, s, magnitude_rows[ck:], real_rows[ck:])
             current, _ = centred_magnitudes(band, magnitude_rows[:ck].reshape(band.shape))
-            ratio = magnitude_ratio(current, None, magnitude_rows, target, s, lags)
-            real_part_of_product(band, ratio, real_rows[:ck].reshape(band.shape))
+            filtered = adjusted_magnitudes(current, None, magnitude_rows, target, s, lags)
+            magnitude_real_parts(
+                band, current, filtered, target.magnitude_means[s], real_rows[:ck].reshape(band.shape)
+            )
             real = parent_regression_rows(real_rows, ck, target.real_parent[s]).reshape(band.shape)
         real_spectra = pyramid.fft(real)
         if s > 0:  # the parents of the next finer scale (the complex bands themselves are not needed)

@@ -13,16 +13,19 @@ maps the paper's list of statistics to the fields of :class:`PSStatistics`.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.fft as sfft
 
+from ..ops.linalg import parallel_map, worker_count
 from ..transforms.complex_steerable import ComplexSteerablePyramid
 
 __all__ = [
     "PSStatistics",
     "central_autocorrelation",
+    "for_each_band",
     "moments",
     "parent_features",
     "parent_rows",
@@ -31,7 +34,6 @@ __all__ = [
     "pixel_statistics",
     "ps_statistics",
     "statistics_distance",
-    "upsampled_parent",
 ]
 
 
@@ -226,13 +228,6 @@ def phase_doubled_parts(parent: np.ndarray, real_out: np.ndarray, imag_out: np.n
     np.multiply(twice, inv, out=imag_out)
 
 
-def upsampled_parent(pyramid: ComplexSteerablePyramid, band_spectra: list, level: int) -> np.ndarray:
-    """The complex bands of scale ``level + 1`` interpolated to the size of ``level`` (double precision)."""
-    return pyramid.ifft(
-        pyramid.resize_spectrum(band_spectra[level + 1], pyramid.sizes[level + 1], pyramid.sizes[level])
-    )
-
-
 def parent_features(pyramid: ComplexSteerablePyramid, band_spectra: list, lows: list, level: int):
     """Magnitude and real regressors of the scale above ``level``, expanded to its size.
 
@@ -255,29 +250,73 @@ def parent_features(pyramid: ComplexSteerablePyramid, band_spectra: list, lows: 
     ``(magnitudes (N, CK) or None, reals (N, 2CK) or (N, 5C))``.
     """
     if level < pyramid.n_scales - 1:
-        up = upsampled_parent(pyramid, band_spectra, level)
-        c, k = up.shape[:2]
-        mags = np.empty((c * k, up.shape[-2] * up.shape[-1]))
-        reals = np.empty((2 * c * k, mags.shape[1]))
-        parent_rows(up, mags, reals)
+        c, k = band_spectra[level + 1].shape[:2]
+        n = pyramid.sizes[level][0] * pyramid.sizes[level][1]
+        mags, reals = np.empty((c * k, n)), np.empty((2 * c * k, n))
+        parent_rows(pyramid, band_spectra, level, mags, reals)
         return mags.T, reals.T
     low = pyramid.expand(lows[-1], level)  # (C, h, w)
     shifts = [low, np.roll(low, 1, -1), np.roll(low, -1, -1), np.roll(low, 1, -2), np.roll(low, -1, -2)]
     return None, np.stack(shifts, axis=1).reshape(5 * low.shape[0], -1).T
 
 
-def parent_rows(up: np.ndarray, mags_out: np.ndarray, reals_out: np.ndarray) -> None:
-    """Write the regressors of :func:`parent_features` for the parents ``up`` ``(C, K, h, w)``
-    as rows: centred magnitudes into ``mags_out`` ``(CK, hw)``, the phase-doubled bands'
-    real and imaginary parts into ``reals_out`` ``(2CK, hw)`` (per channel: the K real parts,
-    then the K imaginary parts; ``reals_out`` may be single precision).
+def parent_rows(
+    pyramid: ComplexSteerablePyramid,
+    band_spectra: list,
+    level: int,
+    mags_out: np.ndarray,
+    reals_out: np.ndarray,
+) -> None:
+    """Write the regressors of :func:`parent_features` for a scale with a parent scale as rows.
+
+    The parents (``band_spectra[level + 1]`` transformed back at the size of ``level``:
+    :meth:`~texsyn.transforms.complex_steerable.ComplexSteerablePyramid.upsampled_ifft`)
+    are computed band by band (:func:`for_each_band`); their centred magnitudes go into
+    ``mags_out`` ``(CK, hw)``, the phase-doubled bands' real and imaginary parts into
+    ``reals_out`` ``(2CK, hw)`` (per channel: the K real parts, then the K imaginary parts;
+    ``reals_out`` may be single precision).
     """
-    c, k, h, w = up.shape
-    mags = mags_out.reshape(c, k, h, w)
-    np.abs(up, out=mags)  # phase doubling keeps the magnitude
-    mags -= mags.mean(axis=(-2, -1), keepdims=True)
-    parts = reals_out.reshape(c, 2, k, h, w)
-    phase_doubled_parts(up, parts[:, 0], parts[:, 1])
+    spec = band_spectra[level + 1]
+    c, k = spec.shape[:2]
+    flat = spec.reshape((c * k,) + spec.shape[-2:])
+    parts = reals_out.reshape(c, 2, k, -1)
+
+    def one(i: int, workers: int) -> None:
+        up = pyramid.upsampled_ifft(flat[i], level, workers).reshape(-1)
+        mags = mags_out[i]
+        np.abs(up, out=mags)  # phase doubling keeps the magnitude
+        mags -= mags.mean()
+        phase_doubled_parts(up, parts[i // k, 0, i % k], parts[i // k, 1, i % k])
+
+    for_each_band(one, c * k, mags_out.shape[1])
+
+
+#: bands smaller than this many pixels are processed on the calling thread
+_THREADED_BAND_SIZE = 1 << 14
+
+
+def for_each_band(function: Callable[[int, int], None], count: int, size: int) -> None:
+    """Call ``function(i, workers)`` for ``i`` in ``range(count)``, band by band.
+
+    One band at a time keeps a chain of NumPy operations on a band in the processor's cache
+    (the whole pyramid level does not fit); bands of ``size`` pixels or more are shared among
+    texsyn's threads (:func:`texsyn.ops.linalg.parallel_map`). ``workers`` is the number of
+    threads the function's own FFTs may use: 1 on texsyn's threads, all CPUs otherwise. Each
+    band is computed the same way whichever thread runs it, so the bytes do not depend on
+    the number of threads.
+    """
+    cpus = worker_count()
+    workers = min(cpus, count)
+    if workers <= 1 or size < _THREADED_BAND_SIZE:
+        for i in range(count):
+            function(i, cpus)
+        return
+
+    def chunk(start: int) -> None:
+        for i in range(start, count, workers):
+            function(i, 1)
+
+    parallel_map(chunk, range(workers))
 
 
 def pixel_statistics(channels: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -17,7 +17,8 @@ import numpy as np
 import scipy.fft as sfft
 
 from ..ops.linalg import worker_count
-from .portilla import PSStatistics
+from ..transforms.complex_steerable import inverse_norm
+from .portilla import PSStatistics, for_each_band
 
 __all__ = [
     "adjust_correlation",
@@ -33,7 +34,8 @@ __all__ = [
     "impose_parent_regression",
     "impose_pixel_statistics",
     "impose_skewness",
-    "magnitude_ratio",
+    "adjusted_magnitudes",
+    "magnitude_real_parts",
     "parent_regression_rows",
     "real_part_of_product",
     "shrink_highpass",
@@ -69,13 +71,16 @@ def filter_autocorrelation(x: np.ndarray, target: np.ndarray) -> np.ndarray:
     spec = sfft.rfft2(np.asarray(x, dtype=np.float32), workers=workers)
     power = np.square(spec.real)
     power += np.square(spec.imag)
-    cx = sfft.irfft2(power, s=(h, w), workers=workers).astype(np.float64) / (h * w)
     half = _half_offsets(lag)
     diff = half[:, None, :] - half[None, :, :]
     summ = half[:, None, :] + half[None, :, :]
     nonzero = np.any(half != 0, axis=1)
-    a = cx[..., diff[..., 0] % h, diff[..., 1] % w]
-    a = a + np.where(nonzero[None, :], cx[..., summ[..., 0] % h, summ[..., 1] % w], 0.0)
+    rows, cx = _autocorrelation_rows(
+        power, np.concatenate([diff[..., 0].ravel(), summ[..., 0].ravel()]), h, w
+    )
+    at = np.searchsorted(rows, diff[..., 0] % h), np.searchsorted(rows, summ[..., 0] % h)
+    a = cx[..., at[0], diff[..., 1] % w]
+    a = a + np.where(nonzero[None, :], cx[..., at[1], summ[..., 1] % w], 0.0)
     b = target[..., half[:, 0] + lag, half[:, 1] + lag]
     try:
         coef = np.linalg.solve(a, b[..., None])[..., 0]
@@ -89,6 +94,23 @@ def filter_autocorrelation(x: np.ndarray, target: np.ndarray) -> np.ndarray:
     gain = np.sqrt(np.abs(_symmetric_filter_spectrum(coef, half, batch, h, w).real))
     spec *= gain
     return sfft.irfft2(spec, s=(h, w), workers=workers)
+
+
+def _autocorrelation_rows(
+    power: np.ndarray, lags: np.ndarray, h: int, w: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Rows ``lags % h`` of ``irfft2(power, s=(h, w)).astype(float64) / (h w)``: ``(rows, values)``.
+
+    ``irfft2`` transforms along the columns, then along the rows (scaled by ``1 / (h w)``, a
+    product after the transform); the auto-correlation window needs a few rows, so the
+    second pass runs on those only. Same bytes as the full transform.
+    """
+    rows = np.unique(lags % h)
+    workers = worker_count()
+    columns = sfft.ifft(power + 0.0j, axis=-2, norm="forward", overwrite_x=True, workers=workers)
+    values = sfft.irfft(columns[..., rows, :], n=w, axis=-1, norm="forward", workers=workers)
+    values *= inverse_norm(h * w, values.dtype)
+    return rows, values.astype(np.float64) / (h * w)
 
 
 def _symmetric_filter_spectrum(
@@ -466,21 +488,34 @@ def impose_magnitude_statistics(
     n = band.shape[-1] * band.shape[-2]
     if parent_magnitudes is None:
         current, mags = centred_magnitudes(band)
-        return band * magnitude_ratio(current, mags, None, target, level, lags)
-    rows = np.empty((c * k + parent_magnitudes.shape[1], n))
-    current, _ = centred_magnitudes(band, rows[: c * k].reshape(band.shape))
-    rows[c * k :] = parent_magnitudes.T
-    return band * magnitude_ratio(current, None, rows, target, level, lags)
+        filtered = adjusted_magnitudes(current, mags, None, target, level, lags)
+    else:
+        rows = np.empty((c * k + parent_magnitudes.shape[1], n))
+        current, _ = centred_magnitudes(band, rows[: c * k].reshape(band.shape))
+        rows[c * k :] = parent_magnitudes.T
+        filtered = adjusted_magnitudes(current, None, rows, target, level, lags)
+    ratio = np.add(filtered, target.magnitude_means[level][..., None, None], dtype=np.float64)
+    np.maximum(ratio, 0.0, out=ratio)
+    return band * (ratio / np.where(current > 0, current, 1.0))
 
 
 def centred_magnitudes(band: np.ndarray, out: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """``(|band|, |band| - its mean over each band)``, the second written into ``out`` if given."""
-    current = np.abs(band)
-    mean = current.mean(axis=(-2, -1), keepdims=True)
-    return current, (current - mean if out is None else np.subtract(current, mean, out=out))
+    """``(|band|, |band| - its mean over each band)`` for bands ``(..., h, w)``, the second
+    written into ``out`` if given (band by band: :func:`~texsyn.models.portilla.for_each_band`)."""
+    h, w = band.shape[-2:]
+    current = np.empty(band.shape, dtype=band.real.dtype)
+    centred = np.empty(band.shape, dtype=current.dtype) if out is None else out
+    flat, mags, result = (a.reshape(-1, h * w) for a in (band, current, centred))
+
+    def one(i: int, workers: int) -> None:
+        np.abs(flat[i], out=mags[i])
+        np.subtract(mags[i], mags[i].mean(), out=result[i])
+
+    for_each_band(one, flat.shape[0], h * w)
+    return current, centred
 
 
-def magnitude_ratio(
+def adjusted_magnitudes(
     current: np.ndarray,
     mags: np.ndarray | None,
     rows: np.ndarray | None,
@@ -488,7 +523,8 @@ def magnitude_ratio(
     level: int,
     lags: int,
 ) -> np.ndarray:
-    """The factor ``new magnitude / |band|`` of :func:`impose_magnitude_statistics` (0 where ``band = 0``).
+    """The centred magnitudes of :func:`impose_magnitude_statistics` after their covariance
+    and auto-correlation steps (single precision when the window is wider than a pixel).
 
     ``current`` is ``|band|`` ``(C, K, h, w)``; at the coarsest scale ``mags`` holds its
     centred magnitudes and ``rows`` is None, elsewhere ``rows`` ``(CK + M, hw)`` holds them
@@ -504,12 +540,33 @@ def magnitude_ratio(
             rows, c * k, target.magnitude_cross[level], target.magnitude_parent[level]
         )
     window = fit_window(target.magnitude_autocorr[level], current.shape[-2:], lags)
-    filtered = filter_autocorrelation(m.reshape(current.shape), window)
-    ratio = np.add(filtered, target.magnitude_means[level][..., None, None], dtype=np.float64)
-    np.maximum(ratio, 0.0, out=ratio)
-    if current.size and current.min() > 0:
-        return np.divide(ratio, current, out=ratio)
-    return np.divide(ratio, np.where(current > 0, current, 1.0), out=ratio)
+    return filter_autocorrelation(m.reshape(current.shape), window)
+
+
+def magnitude_real_parts(
+    band: np.ndarray, current: np.ndarray, filtered: np.ndarray, means: np.ndarray, out: np.ndarray
+) -> np.ndarray:
+    """The real parts of :func:`impose_magnitude_statistics`'s result, written into ``out``.
+
+    Band by band: the new magnitude ``max(filtered + mean, 0)`` over the old ``current``
+    (0 where the band is 0) multiplies the band's real part (:func:`real_part_of_product`).
+    ``means`` is ``(C, K)``; ``out`` may be single precision (the product is rounded once).
+    """
+    h, w = band.shape[-2:]
+    flat, cur, new, res = (a.reshape(-1, h * w) for a in (band, current, filtered, out))
+    mean = np.asarray(means, dtype=np.float64).reshape(-1)
+
+    def one(i: int, workers: int) -> None:
+        ratio = np.add(new[i], mean[i], dtype=np.float64)
+        np.maximum(ratio, 0.0, out=ratio)
+        if cur[i].min() > 0:
+            np.divide(ratio, cur[i], out=ratio)
+        else:
+            np.divide(ratio, np.where(cur[i] > 0, cur[i], 1.0), out=ratio)
+        real_part_of_product(flat[i], ratio, res[i])
+
+    for_each_band(one, flat.shape[0], h * w)
+    return out
 
 
 def real_part_of_product(band: np.ndarray, ratio: np.ndarray, out: np.ndarray) -> np.ndarray:

@@ -18,13 +18,21 @@ finest first (``docs/methods/portilla_simoncelli.md``).
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import scipy.fft as sfft
 
 from ..ops.linalg import worker_count
 from .steerable import crop_indices, oriented_windows, pyramid_sizes, radial_lowpass
 
-__all__ = ["ComplexSteerablePyramid"]
+__all__ = ["ComplexSteerablePyramid", "inverse_norm"]
+
+
+@functools.cache
+def _crop_runs(n_fine: int, n_coarse: int) -> list[tuple[slice, slice]]:
+    """:func:`_runs` of ``crop_indices(n_fine, n_coarse)`` (cached)."""
+    return _runs(crop_indices(n_fine, n_coarse))
 
 
 def _runs(indices: np.ndarray) -> list[tuple[slice, slice]]:
@@ -46,6 +54,12 @@ def _runs(indices: np.ndarray) -> list[tuple[slice, slice]]:
         (slice(int(indices[a]), int(indices[b - 1]) + 1), slice(int(a), int(b)))
         for a, b in zip(starts, stops)
     ]
+
+
+def inverse_norm(n: int, dtype) -> np.ndarray:
+    """pocketfft's ``1 / n`` normalisation factor, a 0-d array of ``dtype``: computed in long
+    double, then rounded once (``norm_fct`` of scipy's ``pypocketfft``)."""
+    return np.asarray(np.longdouble(1) / np.longdouble(n)).astype(dtype)
 
 
 class ComplexSteerablePyramid:
@@ -143,21 +157,60 @@ class ComplexSteerablePyramid:
         scale = (size_to[0] * size_to[1]) / (size_from[0] * size_from[1])
         shape = spec.shape[:-2] + tuple(size_to)
         if size_to[0] <= size_from[0]:
-            rows = _runs(crop_indices(size_from[0], size_to[0]))
-            cols = _runs(crop_indices(size_from[1], size_to[1]))
+            rows = _crop_runs(size_from[0], size_to[0])
+            cols = _crop_runs(size_from[1], size_to[1])
             out = np.empty(shape, dtype=np.result_type(spec.dtype, scale))
             for fine_r, coarse_r in rows:
                 for fine_c, coarse_c in cols:
                     np.multiply(spec[..., fine_r, fine_c], scale, out=out[..., coarse_r, coarse_c])
             return out
-        rows = _runs(crop_indices(size_to[0], size_from[0]))
-        cols = _runs(crop_indices(size_to[1], size_from[1]))
+        rows = _crop_runs(size_to[0], size_from[0])
+        cols = _crop_runs(size_to[1], size_from[1])
         out = np.zeros(shape, dtype=complex)
         for fine_r, coarse_r in rows:
             for fine_c, coarse_c in cols:
                 # the product in the spectrum's own precision, then widened (as ``spec * scale``)
                 np.multiply(spec[..., coarse_r, coarse_c], scale, out=out[..., fine_r, fine_c])
         return out
+
+    def upsampled_ifft(self, spec: np.ndarray, level: int, workers: int | None = None) -> np.ndarray:
+        """``ifft(resize_spectrum(spec, sizes[level + 1], sizes[level]))``, the same bytes, faster.
+
+        The zero-padded spectrum's columns outside the coarse frequencies are zero, so the
+        first pass of the 2-D inverse transform (along the columns, scaled by ``1 / (h w)``
+        as pocketfft scales it: a product after the transform) runs on the coarse columns
+        only; a zero column's transform (zeros whose signs pocketfft's arithmetic sets) is
+        computed once and copied. The second pass (along the rows) is the 2-D transform's own.
+        ``workers`` threads run the transforms (default: every CPU of the process).
+        """
+        (hc, wc), (h, w) = self.sizes[level + 1], self.sizes[level]
+        scale = (h * w) / (hc * wc)
+        workers = worker_count() if workers is None else workers
+        batch = spec.shape[:-2]
+        columns = np.empty(batch + (h, wc + 1), dtype=complex)  # the coarse columns, then a zero one
+        columns[..., wc] = 0.0
+        rows = _crop_runs(h, hc)
+        for (fine_r, coarse_r), (next_r, _) in zip(rows, rows[1:] + [(slice(h, h), None)]):
+            np.multiply(spec[..., coarse_r, :], scale, out=columns[..., fine_r, :wc])
+            columns[..., fine_r.stop : next_r.start, :wc] = 0.0  # the zero padding between the runs
+        columns[..., : rows[0][0].start, :wc] = 0.0
+        columns = sfft.ifft(columns, axis=-2, norm="forward", overwrite_x=True, workers=workers)
+        # scale by 1 / (h w) as pocketfft does (real and imaginary parts by a real factor) while
+        # copying into the full array, whose other columns are the zero column's transform
+        norm = inverse_norm(h * w, np.float64)
+        out = np.empty(batch + (h, w), dtype=complex)
+        source, target = columns.view(np.float64), out.view(np.float64)
+        previous = 0
+        for fine_c, coarse_c in _crop_runs(w, wc):
+            out[..., previous : fine_c.start] = columns[..., wc : wc + 1]
+            np.multiply(
+                source[..., 2 * coarse_c.start : 2 * coarse_c.stop],
+                norm,
+                out=target[..., 2 * fine_c.start : 2 * fine_c.stop],
+            )
+            previous = fine_c.stop
+        out[..., previous:] = columns[..., wc : wc + 1]
+        return sfft.ifft(out, axis=-1, norm="forward", overwrite_x=True, workers=workers)
 
     def expand(self, image: np.ndarray, level: int) -> np.ndarray:
         """Interpolate ``(..., h, w)`` arrays of level ``level + 1`` to the size of ``level``."""
