@@ -67,7 +67,8 @@ def project_statistics(
     """
     n_scales = pyramid.n_scales
     pixel_var = target.pixel_moments[:, 1]
-    highpass, bands, lows, spectra = pyramid.forward(x, spectra=True, all_lows=False)
+    highpass, bands, lows = pyramid.forward(x, all_lows=False)
+    spectra: list = [None] * n_scales  # the bands' spectra, filled coarse to fine as parents
     lows[-1] = lows[-1] - lows[-1].mean(axis=(-2, -1), keepdims=True)
     image = impose_lowpass_statistics(
         pyramid.lowpass_image(lows[-1]),

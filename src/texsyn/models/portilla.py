@@ -13,19 +13,16 @@ maps the paper's list of statistics to the fields of :class:`PSStatistics`.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.fft as sfft
 
-from ..ops.linalg import parallel_map, worker_count
-from ..transforms.complex_steerable import ComplexSteerablePyramid
+from ..transforms.complex_steerable import ComplexSteerablePyramid, for_each_band
 
 __all__ = [
     "PSStatistics",
     "central_autocorrelation",
-    "for_each_band",
     "moments",
     "parent_features",
     "parent_rows",
@@ -289,34 +286,6 @@ def parent_rows(
         phase_doubled_parts(up, parts[i // k, 0, i % k], parts[i // k, 1, i % k])
 
     for_each_band(one, c * k, mags_out.shape[1])
-
-
-#: bands smaller than this many pixels are processed on the calling thread
-_THREADED_BAND_SIZE = 1 << 14
-
-
-def for_each_band(function: Callable[[int, int], None], count: int, size: int) -> None:
-    """Call ``function(i, workers)`` for ``i`` in ``range(count)``, band by band.
-
-    One band at a time keeps a chain of NumPy operations on a band in the processor's cache
-    (the whole pyramid level does not fit); bands of ``size`` pixels or more are shared among
-    texsyn's threads (:func:`texsyn.ops.linalg.parallel_map`). ``workers`` is the number of
-    threads the function's own FFTs may use: 1 on texsyn's threads, all CPUs otherwise. Each
-    band is computed the same way whichever thread runs it, so the bytes do not depend on
-    the number of threads.
-    """
-    cpus = worker_count()
-    workers = min(cpus, count)
-    if workers <= 1 or size < _THREADED_BAND_SIZE:
-        for i in range(count):
-            function(i, cpus)
-        return
-
-    def chunk(start: int) -> None:
-        for i in range(start, count, workers):
-            function(i, 1)
-
-    parallel_map(chunk, range(workers))
 
 
 def pixel_statistics(channels: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -17,8 +17,8 @@ import numpy as np
 import scipy.fft as sfft
 
 from ..ops.linalg import worker_count
-from ..transforms.complex_steerable import inverse_norm
-from .portilla import PSStatistics, for_each_band
+from ..transforms.complex_steerable import for_each_band, inverse_norm
+from .portilla import PSStatistics
 
 __all__ = [
     "adjust_correlation",
@@ -313,16 +313,19 @@ def impose_skewness(x: np.ndarray, target: float) -> np.ndarray:
     if is_flat(m2, mean):
         return x
     m3 = np.dot(d2, d) / d.size
-    g = d2 - (m3 / m2) * d - m2
+    g = np.multiply(d, m3 / m2)  # g = d2 - (m3 / m2) d - m2, in place
+    np.subtract(d2, g, out=g)
+    g -= m2
     g2 = g * g
     num = [m3, 3 * np.dot(d2, g) / d.size, 3 * np.dot(d, g2) / d.size, np.dot(g2, g) / d.size]
     den = [m2, 2 * np.dot(d, g) / d.size, g2.mean()]
     lam = _solve_lambda(num, den, target, 3)
     if lam is None:  # unreachable target: go to the closest reachable skewness instead
         lam = _closest_lambda(num, den, target, 1.5, np.sqrt(m2 / max(den[2], 1e-300)))
-    y = d + lam * g
-    y *= np.sqrt(m2 / np.mean(y * y))
-    return (y + mean).reshape(x.shape)
+    y = np.add(d, np.multiply(g, lam, out=g2), out=g2)  # d + lam g
+    y *= np.sqrt(m2 / np.mean(np.multiply(y, y, out=d2)))
+    y += mean
+    return y.reshape(x.shape)
 
 
 def impose_kurtosis(x: np.ndarray, target: float) -> np.ndarray:
@@ -346,17 +349,22 @@ def impose_kurtosis(x: np.ndarray, target: float) -> np.ndarray:
         coef = np.linalg.solve(gram, rhs)
     except np.linalg.LinAlgError:
         coef = np.linalg.lstsq(gram, rhs, rcond=None)[0]
-    g = d3 - coef[0] - coef[1] * d - coef[2] * d2
+    g = np.subtract(d3, coef[0])  # g = d3 - coef[0] - coef[1] d - coef[2] d2, in place
+    term = np.multiply(d, coef[1])
+    g -= term
+    g -= np.multiply(d2, coef[2], out=term)
     g2 = g * g
-    num = [m[4], 4 * np.dot(d3, g) / n, 6 * np.dot(d2, g2) / n, 4 * np.dot(d, g2 * g) / n, np.dot(g2, g2) / n]
+    cube = np.multiply(g2, g, out=term)
+    num = [m[4], 4 * np.dot(d3, g) / n, 6 * np.dot(d2, g2) / n, 4 * np.dot(d, cube) / n, np.dot(g2, g2) / n]
     den = [m[2], 2 * np.dot(d, g) / n, g2.mean()]
     lam = _solve_lambda(num, den, target, 4)
     if lam is None:
         lam = _closest_lambda(num, den, target, 2.0, np.sqrt(m[2] / max(den[2], 1e-300)))
-    y = d + lam * g
+    y = np.add(d, np.multiply(g, lam, out=term), out=term)  # d + lam g
     y -= y.mean()
-    y *= np.sqrt(m[2] / np.mean(y * y))
-    return (y + mean).reshape(x.shape)
+    y *= np.sqrt(m[2] / np.mean(np.multiply(y, y, out=g2)))
+    y += mean
+    return y.reshape(x.shape)
 
 
 def _sqrtm(c: np.ndarray, inverse: bool = False) -> np.ndarray:
@@ -438,14 +446,17 @@ def impose_lowpass_statistics(
     active = target_var / np.maximum(pixel_var, 1e-300) > 1e-4
     out = np.array(images, dtype=np.float64)
     if active.any():
-        out[active] = impose_autocorrelation(out[active], window[active])
-    for c in range(out.shape[0]):
+        out[active] = filter_autocorrelation(out[active], window[active])
+
+    def one(c: int, workers: int) -> None:
         if active[c]:
             out[c] = impose_kurtosis(impose_skewness(out[c], skew_kurt[c, 0]), skew_kurt[c, 1])
         else:
             current = np.mean((out[c] - out[c].mean()) ** 2)
             if current > 0:
                 out[c] *= np.sqrt(target_var[c] / current)
+
+    for_each_band(one, out.shape[0], out.shape[-1] * out.shape[-2])  # channel by channel
     return out
 
 
@@ -501,7 +512,7 @@ def impose_magnitude_statistics(
 
 def centred_magnitudes(band: np.ndarray, out: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``(|band|, |band| - its mean over each band)`` for bands ``(..., h, w)``, the second
-    written into ``out`` if given (band by band: :func:`~texsyn.models.portilla.for_each_band`)."""
+    written into ``out`` if given (band by band: :func:`~texsyn.transforms.complex_steerable.for_each_band`)."""
     h, w = band.shape[-2:]
     current = np.empty(band.shape, dtype=band.real.dtype)
     centred = np.empty(band.shape, dtype=current.dtype) if out is None else out
@@ -636,9 +647,12 @@ def impose_pixel_statistics(x: np.ndarray, target: PSStatistics) -> np.ndarray:
     flat = x.reshape(c, -1)
     centred = (flat - flat.mean(axis=1, keepdims=True)).T
     flat = adjust_correlation(centred, target.colour_covariance).T + mean0[:, None]
-    for ci in range(c):
+
+    def one(ci: int, workers: int) -> None:
         if var0[ci] > 0:
             flat[ci] = impose_skewness(flat[ci], target.pixel_moments[ci, 2])
             flat[ci] = impose_kurtosis(flat[ci], target.pixel_moments[ci, 3])
+
+    for_each_band(one, c, flat.shape[1])  # channel by channel
     flat = np.clip(flat, target.pixel_range[:, :1], target.pixel_range[:, 1:])
     return flat.reshape(x.shape)

@@ -19,14 +19,15 @@ finest first (``docs/methods/portilla_simoncelli.md``).
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable
 
 import numpy as np
 import scipy.fft as sfft
 
-from ..ops.linalg import worker_count
+from ..ops.linalg import parallel_map, worker_count
 from .steerable import crop_indices, oriented_windows, pyramid_sizes, radial_lowpass
 
-__all__ = ["ComplexSteerablePyramid", "inverse_norm"]
+__all__ = ["ComplexSteerablePyramid", "for_each_band", "inverse_norm"]
 
 
 @functools.cache
@@ -60,6 +61,34 @@ def inverse_norm(n: int, dtype) -> np.ndarray:
     """pocketfft's ``1 / n`` normalisation factor, a 0-d array of ``dtype``: computed in long
     double, then rounded once (``norm_fct`` of scipy's ``pypocketfft``)."""
     return np.asarray(np.longdouble(1) / np.longdouble(n)).astype(dtype)
+
+
+#: bands smaller than this many pixels are processed on the calling thread
+_THREADED_BAND_SIZE = 1 << 14
+
+
+def for_each_band(function: Callable[[int, int], None], count: int, size: int) -> None:
+    """Call ``function(i, workers)`` for ``i`` in ``range(count)``, band by band.
+
+    One band at a time keeps a chain of NumPy operations on a band in the processor's cache
+    (the whole pyramid level does not fit); bands of ``size`` pixels or more are shared among
+    texsyn's threads (:func:`texsyn.ops.linalg.parallel_map`). ``workers`` is the number of
+    threads the function's own FFTs may use: 1 on texsyn's threads, all CPUs otherwise. Each
+    band is computed the same way whichever thread runs it, so the bytes do not depend on
+    the number of threads.
+    """
+    cpus = worker_count()
+    workers = min(cpus, count)
+    if workers <= 1 or size < _THREADED_BAND_SIZE:
+        for i in range(count):
+            function(i, cpus)
+        return
+
+    def chunk(start: int) -> None:
+        for i in range(start, count, workers):
+            function(i, 1)
+
+    parallel_map(chunk, range(workers))
 
 
 class ComplexSteerablePyramid:
@@ -233,11 +262,27 @@ class ComplexSteerablePyramid:
         bands, lows, band_spectra = [], [], []
         for s in range(self.n_scales):
             lows.append(self.ifft(low).real if all_lows else None)
-            band_spectra.append(low[:, None] * self.analytic_filters[s])
-            bands.append(self.ifft(band_spectra[-1]))
+            if spectra:
+                band_spectra.append(low[:, None] * self.analytic_filters[s])
+                bands.append(self.ifft(band_spectra[-1]))
+            else:
+                bands.append(self._bands(low, s))
             low = self.resize_spectrum(low * self.lo[s], self.sizes[s], self.sizes[s + 1])
         lows.append(self.ifft(low).real)
         return (highpass, bands, lows, band_spectra) if spectra else (highpass, bands, lows)
+
+    def _bands(self, low: np.ndarray, level: int) -> np.ndarray:
+        """``ifft(low[:, None] * analytic_filters[level])``, band by band (:func:`for_each_band`)."""
+        filters = self.analytic_filters[level]
+        c, k = low.shape[0], filters.shape[0]
+        out = np.empty((c, k) + low.shape[1:], dtype=np.result_type(low.dtype, filters.dtype))
+
+        def one(i: int, workers: int) -> None:
+            band = np.multiply(low[i // k], filters[i % k], out=out[i // k, i % k])
+            sfft.ifft2(band, overwrite_x=True, workers=workers)  # in place
+
+        for_each_band(one, c * k, low.shape[-1] * low.shape[-2])
+        return out
 
     def lowpass_image(self, residual: np.ndarray) -> np.ndarray:
         """The coarsest partially reconstructed image: the low-pass residual filtered by ``L(r/2)``."""
