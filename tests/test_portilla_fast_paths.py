@@ -292,9 +292,10 @@ def _fitted(colour: str):
 @pytest.mark.parametrize("shape", [(128, 128), (72, 90)])
 @pytest.mark.parametrize("cpus", [1, 3])
 def test_the_iteration_gives_the_plain_loops_bytes(colour, shape, cpus, monkeypatch):
-    # 128x128 bands are shared among threads (for_each_band), 72x90 has odd band sizes
+    # 128x128 bands go one by one (for_each_band), 72x90 all at once, with odd band sizes;
+    # the larger FFTs use ``cpus`` threads
     monkeypatch.setattr(complex_steerable, "worker_count", lambda: cpus)
-    monkeypatch.setattr(projections, "worker_count", lambda: cpus)
+    monkeypatch.setattr(complex_steerable, "_THREADED_FFT", 1 << 12)
     model = _fitted(colour)
     target = model.statistics_
     pyramid = ComplexSteerablePyramid(shape, target.n_scales, target.n_orientations, single=True)

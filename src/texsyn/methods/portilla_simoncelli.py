@@ -68,7 +68,6 @@ def project_statistics(
     n_scales = pyramid.n_scales
     pixel_var = target.pixel_moments[:, 1]
     highpass, bands, lows = pyramid.forward(x, all_lows=False)
-    spectra: list = [None] * n_scales  # the bands' spectra, filled coarse to fine as parents
     lows[-1] = lows[-1] - lows[-1].mean(axis=(-2, -1), keepdims=True)
     image = impose_lowpass_statistics(
         pyramid.lowpass_image(lows[-1]),
@@ -77,38 +76,56 @@ def project_statistics(
         pixel_var,
         lags,
     )
+    spectra: list = [None] * n_scales  # the bands' spectra, filled coarse to fine as parents
     for s in range(n_scales - 1, -1, -1):
-        band = bands[s]
-        c, k, h, w = band.shape
-        ck = c * k
-        if s == n_scales - 1:  # no parent scale: the magnitudes' own covariance, no phase regression
-            current, mags = centred_magnitudes(band)
-            filtered = adjusted_magnitudes(current, mags, None, target, s, lags)
-            real = magnitude_real_parts(
-                band, current, filtered, target.magnitude_means[s], np.empty(band.shape, dtype=np.float32)
-            )
-        else:
-            # rows of the two regressions (section 4), filled in place: the band's centred
-            # magnitudes and its parents' (double precision), the band's real parts and the
-            # phase-doubled parents (single precision)
-            magnitude_rows = np.empty((2 * ck, h * w))
-            real_rows = np.empty((3 * ck, h * w), dtype=np.float32)
-            parent_rows(pyramid, spectra, s, magnitude_rows[ck:], real_rows[ck:])
-            current, _ = centred_magnitudes(band, magnitude_rows[:ck].reshape(band.shape))
-            filtered = adjusted_magnitudes(current, None, magnitude_rows, target, s, lags)
-            magnitude_real_parts(
-                band, current, filtered, target.magnitude_means[s], real_rows[:ck].reshape(band.shape)
-            )
-            real = parent_regression_rows(real_rows, ck, target.real_parent[s]).reshape(band.shape)
-        real_spectra = pyramid.fft(real)
-        if s > 0:  # the parents of the next finer scale (the complex bands themselves are not needed)
+        real_spectra = _real_band_spectra(bands[s], spectra, target, pyramid, s, lags)
+        if s > 0:  # the parents of the next finer scale (the complex bands are not needed)
             spectra[s] = real_spectra * pyramid.half_planes[s]
-        image = pyramid.reconstruct_level(image, real, s, real_spectra=real_spectra)
+        image = pyramid.reconstruct_level(image, None, s, real_spectra=real_spectra)
         image = impose_lowpass_statistics(
             image, target.low_autocorr[s], target.low_skew_kurt[:, s], pixel_var, lags
         )
     x = pyramid.reconstruct(image, shrink_highpass(highpass, target.highpass_variance))
     return impose_pixel_statistics(x, target)
+
+
+def _real_band_spectra(
+    band: np.ndarray,
+    spectra: list,
+    target: PSStatistics,
+    pyramid: ComplexSteerablePyramid,
+    s: int,
+    lags: int,
+) -> np.ndarray:
+    """Impose the statistics of scale ``s`` on its complex bands (paper section 4); the Fourier
+    transforms of their new real parts.
+
+    The magnitudes' covariance across orientations, channels and with the parent scale
+    (``spectra[s + 1]``), their auto-correlation and mean; the real parts' correlation with the
+    phase-doubled parents.
+    """
+    c, k, h, w = band.shape
+    ck = c * k
+    if s == pyramid.n_scales - 1:  # no parent scale: the magnitudes' own covariance, no phase regression
+        current, mags = centred_magnitudes(band)
+        filtered = adjusted_magnitudes(current, mags, None, target, s, lags)
+        real = magnitude_real_parts(
+            band, current, filtered, target.magnitude_means[s], np.empty(band.shape, dtype=np.float32)
+        )
+    else:
+        # rows of the two regressions, filled in place: the band's centred magnitudes and its
+        # parents' (double precision), the band's real parts and the phase-doubled parents
+        # (single precision)
+        magnitude_rows = np.empty((2 * ck, h * w))
+        real_rows = np.empty((3 * ck, h * w), dtype=np.float32)
+        parent_rows(pyramid, spectra, s, magnitude_rows[ck:], real_rows[ck:])
+        current, _ = centred_magnitudes(band, magnitude_rows[:ck].reshape(band.shape))
+        filtered = adjusted_magnitudes(current, None, magnitude_rows, target, s, lags)
+        magnitude_real_parts(
+            band, current, filtered, target.magnitude_means[s], real_rows[:ck].reshape(band.shape)
+        )
+        real = parent_regression_rows(real_rows, ck, target.real_parent[s]).reshape(band.shape)
+    return pyramid.fft(real)
 
 
 def ps_synthesis(

@@ -278,14 +278,21 @@ def parent_rows(
     flat = spec.reshape((c * k,) + spec.shape[-2:])
     parts = reals_out.reshape(c, 2, k, -1)
 
-    def one(i: int, workers: int) -> None:
-        up = pyramid.upsampled_ifft(flat[i], level, workers).reshape(-1)
-        mags = mags_out[i]
+    def run(bands: slice) -> None:
+        up = pyramid.upsampled_ifft(flat[bands], level).reshape(bands.stop - bands.start, -1)
+        mags = mags_out[bands]
         np.abs(up, out=mags)  # phase doubling keeps the magnitude
-        mags -= mags.mean()
-        phase_doubled_parts(up, parts[i // k, 0, i % k], parts[i // k, 1, i % k])
+        mags -= mags.mean(axis=-1, keepdims=True)
+        for ci in range(bands.start // k, (bands.stop - 1) // k + 1):  # the channels in the slice
+            first, stop = max(bands.start, ci * k), min(bands.stop, (ci + 1) * k)
+            rows = up[first - bands.start : stop - bands.start]
+            phase_doubled_parts(
+                rows,
+                parts[ci, 0, first - ci * k : stop - ci * k],
+                parts[ci, 1, first - ci * k : stop - ci * k],
+            )
 
-    for_each_band(one, c * k, mags_out.shape[1])
+    for_each_band(run, c * k, mags_out.shape[1])
 
 
 def pixel_statistics(channels: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

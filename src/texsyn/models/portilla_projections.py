@@ -16,8 +16,7 @@ import functools
 import numpy as np
 import scipy.fft as sfft
 
-from ..ops.linalg import worker_count
-from ..transforms.complex_steerable import for_each_band, inverse_norm
+from ..transforms.complex_steerable import fft_workers, for_each_band, inverse_norm
 from .portilla import PSStatistics
 
 __all__ = [
@@ -67,7 +66,7 @@ def filter_autocorrelation(x: np.ndarray, target: np.ndarray) -> np.ndarray:
         x = np.asarray(x, dtype=np.float64)
         cur = np.mean(x**2, axis=(-2, -1), keepdims=True)
         return x * np.sqrt(target[..., :1, :1] / np.where(cur > 0, cur, 1.0))
-    workers = worker_count()
+    workers = fft_workers(x.size)
     spec = sfft.rfft2(np.asarray(x, dtype=np.float32), workers=workers)
     power = np.square(spec.real)
     power += np.square(spec.imag)
@@ -106,7 +105,7 @@ def _autocorrelation_rows(
     second pass runs on those only. Same bytes as the full transform.
     """
     rows = np.unique(lags % h)
-    workers = worker_count()
+    workers = fft_workers(2 * power.size)
     columns = sfft.ifft(power + 0.0j, axis=-2, norm="forward", overwrite_x=True, workers=workers)
     values = sfft.irfft(columns[..., rows, :], n=w, axis=-1, norm="forward", workers=workers)
     values *= inverse_norm(h * w, values.dtype)
@@ -128,7 +127,7 @@ def _symmetric_filter_spectrum(
     ch = np.zeros(batch + (rows.size, w), dtype=np.float32)  # the used rows only
     ch[..., np.searchsorted(rows, rows_pos), half[:, 1] % w] = coef
     ch[..., np.searchsorted(rows, rows_neg), -half[:, 1] % w] = coef
-    workers = worker_count()
+    workers = fft_workers(int(np.prod(batch)) * h * w)
     spec = np.zeros(batch + (h, w // 2 + 1), dtype=np.complex64)
     spec[..., rows, :] = sfft.rfft(ch, axis=-1, workers=workers)
     return sfft.fft(spec, axis=-2, overwrite_x=True, workers=workers)
@@ -448,15 +447,16 @@ def impose_lowpass_statistics(
     if active.any():
         out[active] = filter_autocorrelation(out[active], window[active])
 
-    def one(c: int, workers: int) -> None:
-        if active[c]:
-            out[c] = impose_kurtosis(impose_skewness(out[c], skew_kurt[c, 0]), skew_kurt[c, 1])
-        else:
-            current = np.mean((out[c] - out[c].mean()) ** 2)
-            if current > 0:
-                out[c] *= np.sqrt(target_var[c] / current)
+    def run(channels: slice) -> None:
+        for c in range(channels.start, channels.stop):
+            if active[c]:
+                out[c] = impose_kurtosis(impose_skewness(out[c], skew_kurt[c, 0]), skew_kurt[c, 1])
+            else:
+                current = np.mean((out[c] - out[c].mean()) ** 2)
+                if current > 0:
+                    out[c] *= np.sqrt(target_var[c] / current)
 
-    for_each_band(one, out.shape[0], out.shape[-1] * out.shape[-2])  # channel by channel
+    for_each_band(run, out.shape[0], out.shape[-1] * out.shape[-2])  # channel by channel
     return out
 
 
@@ -518,11 +518,11 @@ def centred_magnitudes(band: np.ndarray, out: np.ndarray | None = None) -> tuple
     centred = np.empty(band.shape, dtype=current.dtype) if out is None else out
     flat, mags, result = (a.reshape(-1, h * w) for a in (band, current, centred))
 
-    def one(i: int, workers: int) -> None:
-        np.abs(flat[i], out=mags[i])
-        np.subtract(mags[i], mags[i].mean(), out=result[i])
+    def run(bands: slice) -> None:
+        np.abs(flat[bands], out=mags[bands])
+        np.subtract(mags[bands], mags[bands].mean(axis=-1, keepdims=True), out=result[bands])
 
-    for_each_band(one, flat.shape[0], h * w)
+    for_each_band(run, flat.shape[0], h * w)
     return current, centred
 
 
@@ -567,16 +567,16 @@ def magnitude_real_parts(
     flat, cur, new, res = (a.reshape(-1, h * w) for a in (band, current, filtered, out))
     mean = np.asarray(means, dtype=np.float64).reshape(-1)
 
-    def one(i: int, workers: int) -> None:
-        ratio = np.add(new[i], mean[i], dtype=np.float64)
+    def run(bands: slice) -> None:
+        ratio = np.add(new[bands], mean[bands, None], dtype=np.float64)
         np.maximum(ratio, 0.0, out=ratio)
-        if cur[i].min() > 0:
-            np.divide(ratio, cur[i], out=ratio)
+        if cur[bands].min() > 0:
+            np.divide(ratio, cur[bands], out=ratio)
         else:
-            np.divide(ratio, np.where(cur[i] > 0, cur[i], 1.0), out=ratio)
-        real_part_of_product(flat[i], ratio, res[i])
+            np.divide(ratio, np.where(cur[bands] > 0, cur[bands], 1.0), out=ratio)
+        real_part_of_product(flat[bands], ratio, res[bands])
 
-    for_each_band(one, flat.shape[0], h * w)
+    for_each_band(run, flat.shape[0], h * w)
     return out
 
 
@@ -648,11 +648,12 @@ def impose_pixel_statistics(x: np.ndarray, target: PSStatistics) -> np.ndarray:
     centred = (flat - flat.mean(axis=1, keepdims=True)).T
     flat = adjust_correlation(centred, target.colour_covariance).T + mean0[:, None]
 
-    def one(ci: int, workers: int) -> None:
-        if var0[ci] > 0:
-            flat[ci] = impose_skewness(flat[ci], target.pixel_moments[ci, 2])
-            flat[ci] = impose_kurtosis(flat[ci], target.pixel_moments[ci, 3])
+    def run(channels: slice) -> None:
+        for ci in range(channels.start, channels.stop):
+            if var0[ci] > 0:
+                flat[ci] = impose_skewness(flat[ci], target.pixel_moments[ci, 2])
+                flat[ci] = impose_kurtosis(flat[ci], target.pixel_moments[ci, 3])
 
-    for_each_band(one, c, flat.shape[1])  # channel by channel
+    for_each_band(run, c, flat.shape[1])  # channel by channel
     flat = np.clip(flat, target.pixel_range[:, :1], target.pixel_range[:, 1:])
     return flat.reshape(x.shape)

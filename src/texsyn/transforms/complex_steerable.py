@@ -24,10 +24,10 @@ from collections.abc import Callable
 import numpy as np
 import scipy.fft as sfft
 
-from ..ops.linalg import parallel_map, worker_count
+from ..ops.linalg import worker_count
 from .steerable import crop_indices, oriented_windows, pyramid_sizes, radial_lowpass
 
-__all__ = ["ComplexSteerablePyramid", "for_each_band", "inverse_norm"]
+__all__ = ["ComplexSteerablePyramid", "fft_workers", "for_each_band", "inverse_norm"]
 
 
 @functools.cache
@@ -63,32 +63,41 @@ def inverse_norm(n: int, dtype) -> np.ndarray:
     return np.asarray(np.longdouble(1) / np.longdouble(n)).astype(dtype)
 
 
-#: bands smaller than this many pixels are processed on the calling thread
-_THREADED_BAND_SIZE = 1 << 14
+#: bands of this many pixels or more are processed one at a time
+_BAND_BY_BAND = 1 << 14
+#: FFTs of this many values or more use every CPU of the process
+_THREADED_FFT = 1 << 17
 
 
-def for_each_band(function: Callable[[int, int], None], count: int, size: int) -> None:
-    """Call ``function(i, workers)`` for ``i`` in ``range(count)``, band by band.
+def fft_workers(size: int) -> int:
+    """Threads for an FFT of ``size`` values: every CPU of the process from :data:`_THREADED_FFT`
+    values, else one.
 
-    One band at a time keeps a chain of NumPy operations on a band in the processor's cache
-    (the whole pyramid level does not fit); bands of ``size`` pixels or more are shared among
-    texsyn's threads (:func:`texsyn.ops.linalg.parallel_map`). ``workers`` is the number of
-    threads the function's own FFTs may use: 1 on texsyn's threads, all CPUs otherwise. Each
-    band is computed the same way whichever thread runs it, so the bytes do not depend on
-    the number of threads.
+    pocketfft transforms each line on one thread, the same way whichever, so the bytes do not
+    depend on the number of threads (``docs/determinism.md``). Measured on the 2-core
+    benchmark machine, two threads take 20-35 % off the transforms of a 256x256 pyramid level
+    (12 bands) but make transforms of a few 10^4 values slower.
     """
-    cpus = worker_count()
-    workers = min(cpus, count)
-    if workers <= 1 or size < _THREADED_BAND_SIZE:
-        for i in range(count):
-            function(i, cpus)
+    return worker_count() if size >= _THREADED_FFT else 1
+
+
+def for_each_band(function: Callable[[slice], None], count: int, size: int) -> None:
+    """Call ``function(bands)`` on slices ``bands`` that cover ``range(count)``.
+
+    Bands of ``size`` pixels or more go one at a time: a chain of NumPy operations on one
+    band stays in the processor's cache, which a whole pyramid level does not fit (measured:
+    the phase doubling of twelve 256x256 bands takes half the time band by band). Smaller
+    bands go all at once (fewer Python and FFT call overheads). ``function`` must compute
+    each band the same way whatever the slice, so that the bytes do not depend on it.
+
+    Threads were tried (the bands shared among texsyn's threads): on the 2-core benchmark
+    machine they burnt 40 % more CPU for no shorter run.
+    """
+    if size < _BAND_BY_BAND:
+        function(slice(0, count))
         return
-
-    def chunk(start: int) -> None:
-        for i in range(start, count, workers):
-            function(i, 1)
-
-    parallel_map(chunk, range(workers))
+    for i in range(count):
+        function(slice(i, i + 1))
 
 
 class ComplexSteerablePyramid:
@@ -162,17 +171,15 @@ class ComplexSteerablePyramid:
     def fft(self, x: np.ndarray) -> np.ndarray:
         """2-D FFT over the last two axes, in the pyramid's precision (``single`` or double).
 
-        The transforms use every CPU of the process (``workers``): each line is transformed
-        by one thread, the same way whichever, so the bytes do not depend on the number of
-        threads (``docs/determinism.md``).
+        Large transforms use several threads (:func:`fft_workers`; same bytes).
         """
         x = np.asarray(x)
         dtype = np.result_type(self.real_dtype, np.complex64) if np.iscomplexobj(x) else self.real_dtype
-        return sfft.fft2(x.astype(dtype, copy=False), workers=worker_count())
+        return sfft.fft2(x.astype(dtype, copy=False), workers=fft_workers(x.size))
 
     def ifft(self, x: np.ndarray) -> np.ndarray:
-        """Inverse 2-D FFT over the last two axes (complex result)."""
-        return sfft.ifft2(x, workers=worker_count())
+        """Inverse 2-D FFT over the last two axes (complex result; threads as :meth:`fft`)."""
+        return sfft.ifft2(x, workers=fft_workers(x.size))
 
     @staticmethod
     def _polar(shape):
@@ -202,7 +209,7 @@ class ComplexSteerablePyramid:
                 np.multiply(spec[..., coarse_r, coarse_c], scale, out=out[..., fine_r, fine_c])
         return out
 
-    def upsampled_ifft(self, spec: np.ndarray, level: int, workers: int | None = None) -> np.ndarray:
+    def upsampled_ifft(self, spec: np.ndarray, level: int) -> np.ndarray:
         """``ifft(resize_spectrum(spec, sizes[level + 1], sizes[level]))``, the same bytes, faster.
 
         The zero-padded spectrum's columns outside the coarse frequencies are zero, so the
@@ -210,11 +217,10 @@ class ComplexSteerablePyramid:
         as pocketfft scales it: a product after the transform) runs on the coarse columns
         only; a zero column's transform (zeros whose signs pocketfft's arithmetic sets) is
         computed once and copied. The second pass (along the rows) is the 2-D transform's own.
-        ``workers`` threads run the transforms (default: every CPU of the process).
         """
         (hc, wc), (h, w) = self.sizes[level + 1], self.sizes[level]
         scale = (h * w) / (hc * wc)
-        workers = worker_count() if workers is None else workers
+        workers = fft_workers(spec.size * (h * w) // (hc * wc))
         batch = spec.shape[:-2]
         columns = np.empty(batch + (h, wc + 1), dtype=complex)  # the coarse columns, then a zero one
         columns[..., wc] = 0.0
@@ -276,12 +282,14 @@ class ComplexSteerablePyramid:
         filters = self.analytic_filters[level]
         c, k = low.shape[0], filters.shape[0]
         out = np.empty((c, k) + low.shape[1:], dtype=np.result_type(low.dtype, filters.dtype))
+        flat = out.reshape((c * k,) + low.shape[1:])
 
-        def one(i: int, workers: int) -> None:
-            band = np.multiply(low[i // k], filters[i % k], out=out[i // k, i % k])
-            sfft.ifft2(band, overwrite_x=True, workers=workers)  # in place
+        def run(bands: slice) -> None:
+            for i in range(bands.start, bands.stop):
+                np.multiply(low[i // k], filters[i % k], out=flat[i])
+            sfft.ifft2(flat[bands], overwrite_x=True, workers=fft_workers(flat[bands].size))  # in place
 
-        for_each_band(one, c * k, low.shape[-1] * low.shape[-2])
+        for_each_band(run, c * k, low.shape[-1] * low.shape[-2])
         return out
 
     def lowpass_image(self, residual: np.ndarray) -> np.ndarray:
@@ -289,7 +297,7 @@ class ComplexSteerablePyramid:
         return self.ifft(self.fft(residual) * self.mid[-1]).real
 
     def reconstruct_level(
-        self, coarser: np.ndarray, real_bands: np.ndarray, level: int, *, real_spectra=None
+        self, coarser: np.ndarray, real_bands: np.ndarray | None, level: int, *, real_spectra=None
     ) -> np.ndarray:
         """Partially reconstructed image of ``level`` from the one of the level below and the
         level's real bands (or their Fourier transforms ``real_spectra``).
@@ -300,6 +308,8 @@ class ComplexSteerablePyramid:
         """
         spec = self.resize_spectrum(self.fft(coarser), self.sizes[level + 1], self.sizes[level])
         if real_spectra is None:
+            if real_bands is None:
+                raise ValueError("reconstruct_level needs the real bands or their spectra")
             real_spectra = self.fft(real_bands)
         # np.sum over the orientations, in its order: ((b0 + b1) + b2) + ...
         filters = self.conj_real_filters[level]
