@@ -304,9 +304,9 @@ def test_the_iteration_gives_the_plain_loops_bytes(colour, shape, cpus, monkeypa
     x = moments[:, 0, None, None] + np.sqrt(moments[:, 1])[:, None, None] * rng.standard_normal(
         (moments.shape[0],) + shape
     )
-    fast, plain = x, x
+    fast, plain, workspace = x, x, {}
     for _ in range(2):
-        fast = project_statistics(fast, target, pyramid, model.lags)
+        fast = project_statistics(fast, target, pyramid, model.lags, workspace=workspace)
         plain = _reference_iteration(plain, target, pyramid, model.lags)
         assert fast.dtype == plain.dtype and fast.tobytes() == plain.tobytes()
 

@@ -52,7 +52,12 @@ __all__ = ["PortillaSimoncelli", "project_statistics", "projection_step", "ps_sy
 
 
 def project_statistics(
-    x: np.ndarray, target: PSStatistics, pyramid: ComplexSteerablePyramid, lags: int
+    x: np.ndarray,
+    target: PSStatistics,
+    pyramid: ComplexSteerablePyramid,
+    lags: int,
+    *,
+    workspace: dict | None = None,
 ) -> np.ndarray:
     """One Portilla–Simoncelli iteration on channels ``(C, H, W)`` (paper section 4).
 
@@ -64,6 +69,10 @@ def project_statistics(
     auto-correlation, skewness and kurtosis; shrink the high-pass residual to its variance;
     reconstruct; impose the pixel statistics (mean, colour covariance, skewness, kurtosis,
     range).
+
+    ``workspace``, a dict kept from one iteration to the next (:func:`projection_step` keeps
+    one), holds the largest scratch arrays, the rows of the regressions: allocating them
+    anew each time costs page faults (about 5 700 per 256x256 colour iteration, 4 % of it).
     """
     n_scales = pyramid.n_scales
     pixel_var = target.pixel_moments[:, 1]
@@ -78,7 +87,7 @@ def project_statistics(
     )
     spectra: list = [None] * n_scales  # the bands' spectra, filled coarse to fine as parents
     for s in range(n_scales - 1, -1, -1):
-        real_spectra = _real_band_spectra(bands[s], spectra, target, pyramid, s, lags)
+        real_spectra = _real_band_spectra(bands[s], spectra, target, pyramid, s, lags, workspace)
         if s > 0:  # the parents of the next finer scale (the complex bands are not needed)
             spectra[s] = real_spectra * pyramid.half_planes[s]
         image = pyramid.reconstruct_level(image, None, s, real_spectra=real_spectra)
@@ -96,6 +105,7 @@ def _real_band_spectra(
     pyramid: ComplexSteerablePyramid,
     s: int,
     lags: int,
+    workspace: dict | None,
 ) -> np.ndarray:
     """Impose the statistics of scale ``s`` on its complex bands (paper section 4); the Fourier
     transforms of their new real parts.
@@ -116,8 +126,8 @@ def _real_band_spectra(
         # rows of the two regressions, filled in place: the band's centred magnitudes and its
         # parents' (double precision), the band's real parts and the phase-doubled parents
         # (single precision)
-        magnitude_rows = np.empty((2 * ck, h * w))
-        real_rows = np.empty((3 * ck, h * w), dtype=np.float32)
+        magnitude_rows = _scratch(workspace, ("magnitude rows", s), (2 * ck, h * w), np.float64)
+        real_rows = _scratch(workspace, ("real rows", s), (3 * ck, h * w), np.float32)
         parent_rows(pyramid, spectra, s, magnitude_rows[ck:], real_rows[ck:])
         current, _ = centred_magnitudes(band, magnitude_rows[:ck].reshape(band.shape))
         filtered = adjusted_magnitudes(current, None, magnitude_rows, target, s, lags)
@@ -126,6 +136,16 @@ def _real_band_spectra(
         )
         real = parent_regression_rows(real_rows, ck, target.real_parent[s]).reshape(band.shape)
     return pyramid.fft(real)
+
+
+def _scratch(workspace: dict | None, key: tuple, shape: tuple, dtype) -> np.ndarray:
+    """An uninitialised array, kept in ``workspace`` under ``key`` for the next call."""
+    if workspace is None:
+        return np.empty(shape, dtype=dtype)
+    array = workspace.get(key)
+    if array is None or array.shape != shape or array.dtype != dtype:
+        array = workspace[key] = np.empty(shape, dtype=dtype)
+    return array
 
 
 def ps_synthesis(
@@ -193,8 +213,10 @@ def _same(channels: np.ndarray) -> np.ndarray:
 def projection_step(target: PSStatistics, pyramid: ComplexSteerablePyramid, lags: int):
     """The step ``step(x, iteration) -> x`` that :func:`ps_synthesis` gives the driver."""
 
+    workspace: dict = {}
+
     def step(x: np.ndarray, iteration: int) -> np.ndarray:
-        return project_statistics(x, target, pyramid, lags)
+        return project_statistics(x, target, pyramid, lags, workspace=workspace)
 
     return step
 

@@ -410,7 +410,9 @@ def adjust_cross_correlation_rows(
     desired = target - target_xy @ ibyy @ target_xy.T
     m = _sqrtm(current, inverse=True) @ _sqrtm(desired)
     # (x - y regression) m + y ibyy target_xy^T, with two products of N-column matrices
-    return m.T @ rows[:k] + (ibyy @ target_xy.T - regression @ m).T @ rows[k:]
+    out = m.T @ rows[:k]
+    out += (ibyy @ target_xy.T - regression @ m).T @ rows[k:]
+    return out
 
 
 def fit_window(target: np.ndarray, shape: tuple[int, int], lags: int) -> np.ndarray:
@@ -470,7 +472,8 @@ def impose_parent_regression(reals: np.ndarray, parents: np.ndarray, target_xp: 
 
 def parent_regression_rows(rows: np.ndarray, k: int, target_xp: np.ndarray) -> np.ndarray:
     """:func:`impose_parent_regression` on single-precision rows: ``rows`` ``(k + m, N)``
-    holds the reals' transpose then the parents'; returns the new reals' transpose ``(k, N)``."""
+    holds the reals' transpose then the parents'; returns the new reals' transpose ``(k, N)``,
+    written over ``rows[:k]``."""
     n = rows.shape[1]
     gram = (rows @ rows.T).astype(np.float64) / n
     own = np.diag(gram)[:k]
@@ -482,7 +485,11 @@ def parent_regression_rows(rows: np.ndarray, k: int, target_xp: np.ndarray) -> n
     desired = np.maximum(own - np.einsum("km,mk->k", target_xp, fit), 0.0)
     scale = np.sqrt(desired / np.where(current > 0, current, 1.0))
     mix = (fit - regression * scale).T.astype(np.float32)
-    return rows[:k] * scale[:, None].astype(np.float32) + mix @ rows[k:]
+    fitted = mix @ rows[k:]
+    out = rows[:k]
+    out *= scale[:, None].astype(np.float32)
+    out += fitted
+    return out
 
 
 def impose_magnitude_statistics(
