@@ -16,6 +16,11 @@ Colour follows J. Vacher, T. Briand, "The Portilla-Simoncelli texture model: tow
 understanding the early visual cortex", IPOL 2021: the statistics of the RGB channels with
 every cross-channel correlation (or, with ``colour='pca'``, of the principal colour axes). ``docs/methods/portilla_simoncelli.md`` lists the
 parameters and the deviations from the paper.
+
+Why this module is long: besides the method class (fit, sample, refine, the distance
+record), it holds the synthesis iteration itself, whose per-scale step works on the
+regressions' rows in place for speed (issue 20; ``docs/methods/portilla_simoncelli.md``,
+"Performance"), and round 1's ``ps_synthesis`` with its deprecated callback.
 """
 
 from __future__ import annotations

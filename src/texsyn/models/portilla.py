@@ -284,13 +284,9 @@ def parent_rows(
         np.abs(up, out=mags)  # phase doubling keeps the magnitude
         mags -= mags.mean(axis=-1, keepdims=True)
         for ci in range(bands.start // k, (bands.stop - 1) // k + 1):  # the channels in the slice
-            first, stop = max(bands.start, ci * k), min(bands.stop, (ci + 1) * k)
-            rows = up[first - bands.start : stop - bands.start]
-            phase_doubled_parts(
-                rows,
-                parts[ci, 0, first - ci * k : stop - ci * k],
-                parts[ci, 1, first - ci * k : stop - ci * k],
-            )
+            first, stop = max(bands.start, ci * k) - ci * k, min(bands.stop, (ci + 1) * k) - ci * k
+            rows = up[ci * k + first - bands.start : ci * k + stop - bands.start]
+            phase_doubled_parts(rows, parts[ci, 0, first:stop], parts[ci, 1, first:stop])
 
     for_each_band(run, c * k, mags_out.shape[1])
 
