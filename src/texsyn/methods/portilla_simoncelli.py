@@ -16,6 +16,11 @@ Colour follows J. Vacher, T. Briand, "The Portilla-Simoncelli texture model: tow
 understanding the early visual cortex", IPOL 2021: the statistics of the RGB channels with
 every cross-channel correlation (or, with ``colour='pca'``, of the principal colour axes). ``docs/methods/portilla_simoncelli.md`` lists the
 parameters and the deviations from the paper.
+
+Why this module is long: besides the method class (fit, sample, refine, the distance
+record), it holds the synthesis iteration itself, whose per-scale step works on the
+regressions' rows in place for speed (issue 20; ``docs/methods/portilla_simoncelli.md``,
+"Performance"), and round 1's ``ps_synthesis`` with its deprecated callback.
 """
 
 from __future__ import annotations
@@ -28,12 +33,14 @@ import numpy as np
 
 from .._validation import OneOf, Range, as_exemplar
 from ..drivers.alternating import alternate_projections
-from ..models.portilla import PSStatistics, parent_features, ps_statistics, statistics_distance
+from ..models.portilla import PSStatistics, parent_rows, ps_statistics, statistics_distance
 from ..models.portilla_projections import (
+    adjusted_magnitudes,
+    centred_magnitudes,
     impose_lowpass_statistics,
-    impose_magnitude_statistics,
-    impose_parent_regression,
     impose_pixel_statistics,
+    magnitude_real_parts,
+    parent_regression_rows,
     shrink_highpass,
     shrink_image_highpass,
 )
@@ -50,7 +57,12 @@ __all__ = ["PortillaSimoncelli", "project_statistics", "projection_step", "ps_sy
 
 
 def project_statistics(
-    x: np.ndarray, target: PSStatistics, pyramid: ComplexSteerablePyramid, lags: int
+    x: np.ndarray,
+    target: PSStatistics,
+    pyramid: ComplexSteerablePyramid,
+    lags: int,
+    *,
+    workspace: dict | None = None,
 ) -> np.ndarray:
     """One Portilla–Simoncelli iteration on channels ``(C, H, W)`` (paper section 4).
 
@@ -62,10 +74,14 @@ def project_statistics(
     auto-correlation, skewness and kurtosis; shrink the high-pass residual to its variance;
     reconstruct; impose the pixel statistics (mean, colour covariance, skewness, kurtosis,
     range).
+
+    ``workspace``, a dict kept from one iteration to the next (:func:`projection_step` keeps
+    one), holds the largest scratch arrays, the rows of the regressions: allocating them
+    anew each time costs page faults (about 5 700 per 256x256 colour iteration, 4 % of it).
     """
     n_scales = pyramid.n_scales
     pixel_var = target.pixel_moments[:, 1]
-    highpass, bands, lows, spectra = pyramid.forward(x, spectra=True, all_lows=False)
+    highpass, bands, lows = pyramid.forward(x, all_lows=False)
     lows[-1] = lows[-1] - lows[-1].mean(axis=(-2, -1), keepdims=True)
     image = impose_lowpass_statistics(
         pyramid.lowpass_image(lows[-1]),
@@ -74,26 +90,67 @@ def project_statistics(
         pixel_var,
         lags,
     )
+    spectra: list = [None] * n_scales  # the bands' spectra, filled coarse to fine as parents
     for s in range(n_scales - 1, -1, -1):
-        parent_mags, parent_reals = parent_features(pyramid, spectra, lows, s)
-        band = impose_magnitude_statistics(bands[s], target, s, parent_mags, lags)
-        if s < n_scales - 1:
-            c, k = band.shape[:2]
-            n = band.shape[-1] * band.shape[-2]
-            reals = impose_parent_regression(
-                band.real.reshape(c * k, n).T, parent_reals, target.real_parent[s]
-            )
-            real = reals.T.reshape(band.shape)
-        else:
-            real = band.real
-        real_spectra = pyramid.fft(real)
-        bands[s], spectra[s] = pyramid.analytic(real, s, real_spectra=real_spectra)
-        image = pyramid.reconstruct_level(image, real, s, real_spectra=real_spectra)
+        real_spectra = _real_band_spectra(bands[s], spectra, target, pyramid, s, lags, workspace)
+        if s > 0:  # the parents of the next finer scale (the complex bands are not needed)
+            spectra[s] = real_spectra * pyramid.half_planes[s]
+        image = pyramid.reconstruct_level(image, None, s, real_spectra=real_spectra)
         image = impose_lowpass_statistics(
             image, target.low_autocorr[s], target.low_skew_kurt[:, s], pixel_var, lags
         )
     x = pyramid.reconstruct(image, shrink_highpass(highpass, target.highpass_variance))
     return impose_pixel_statistics(x, target)
+
+
+def _real_band_spectra(
+    band: np.ndarray,
+    spectra: list,
+    target: PSStatistics,
+    pyramid: ComplexSteerablePyramid,
+    s: int,
+    lags: int,
+    workspace: dict | None,
+) -> np.ndarray:
+    """Impose the statistics of scale ``s`` on its complex bands (paper section 4); the Fourier
+    transforms of their new real parts.
+
+    The magnitudes' covariance across orientations, channels and with the parent scale
+    (``spectra[s + 1]``), their auto-correlation and mean; the real parts' correlation with the
+    phase-doubled parents.
+    """
+    c, k, h, w = band.shape
+    ck = c * k
+    if s == pyramid.n_scales - 1:  # no parent scale: the magnitudes' own covariance, no phase regression
+        current, mags = centred_magnitudes(band)
+        filtered = adjusted_magnitudes(current, mags, None, target, s, lags)
+        real = magnitude_real_parts(
+            band, current, filtered, target.magnitude_means[s], np.empty(band.shape, dtype=np.float32)
+        )
+    else:
+        # rows of the two regressions, filled in place: the band's centred magnitudes and its
+        # parents' (double precision), the band's real parts and the phase-doubled parents
+        # (single precision)
+        magnitude_rows = _scratch(workspace, ("magnitude rows", s), (2 * ck, h * w), np.float64)
+        real_rows = _scratch(workspace, ("real rows", s), (3 * ck, h * w), np.float32)
+        parent_rows(pyramid, spectra, s, magnitude_rows[ck:], real_rows[ck:])
+        current, _ = centred_magnitudes(band, magnitude_rows[:ck].reshape(band.shape))
+        filtered = adjusted_magnitudes(current, None, magnitude_rows, target, s, lags)
+        magnitude_real_parts(
+            band, current, filtered, target.magnitude_means[s], real_rows[:ck].reshape(band.shape)
+        )
+        real = parent_regression_rows(real_rows, ck, target.real_parent[s]).reshape(band.shape)
+    return pyramid.fft(real)
+
+
+def _scratch(workspace: dict | None, key: tuple, shape: tuple, dtype) -> np.ndarray:
+    """An uninitialised array, kept in ``workspace`` under ``key`` for the next call."""
+    if workspace is None:
+        return np.empty(shape, dtype=dtype)
+    array = workspace.get(key)
+    if array is None or array.shape != shape or array.dtype != dtype:
+        array = workspace[key] = np.empty(shape, dtype=dtype)
+    return array
 
 
 def ps_synthesis(
@@ -161,8 +218,10 @@ def _same(channels: np.ndarray) -> np.ndarray:
 def projection_step(target: PSStatistics, pyramid: ComplexSteerablePyramid, lags: int):
     """The step ``step(x, iteration) -> x`` that :func:`ps_synthesis` gives the driver."""
 
+    workspace: dict = {}
+
     def step(x: np.ndarray, iteration: int) -> np.ndarray:
-        return project_statistics(x, target, pyramid, lags)
+        return project_statistics(x, target, pyramid, lags, workspace=workspace)
 
     return step
 

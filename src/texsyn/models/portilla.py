@@ -18,14 +18,16 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.fft as sfft
 
-from ..transforms.complex_steerable import ComplexSteerablePyramid
+from ..transforms.complex_steerable import ComplexSteerablePyramid, for_each_band
 
 __all__ = [
     "PSStatistics",
     "central_autocorrelation",
     "moments",
     "parent_features",
+    "parent_rows",
     "phase_doubled",
+    "phase_doubled_parts",
     "pixel_statistics",
     "ps_statistics",
     "statistics_distance",
@@ -195,13 +197,32 @@ def phase_doubled(parent: np.ndarray) -> np.ndarray:
     >>> phase_doubled(np.array([1j]))  # the angle measured from the imaginary axis is 0
     array([1.+0.j])
     """
-    re, im = parent.real, parent.imag
-    size = np.sqrt(re * re + im * im)
-    inv = np.divide(1.0, size, out=np.zeros_like(size), where=size > 0)
     out = np.empty(parent.shape, dtype=complex)
-    out.real = (im * im - re * re) * inv
-    out.imag = 2.0 * re * im * inv
+    phase_doubled_parts(parent, out.real, out.imag)
     return out
+
+
+def phase_doubled_parts(parent: np.ndarray, real_out: np.ndarray, imag_out: np.ndarray) -> None:
+    """Write the real and imaginary parts of :func:`phase_doubled` into two arrays.
+
+    ``(im^2 - re^2) / |p|`` and ``2 re im / |p|`` (0 where ``p = 0``), computed in the
+    precision of ``parent`` and rounded once into the outputs, which may be single precision
+    (the synthesis puts them straight into the rows of its parent regression).
+    """
+    re, im = parent.real, parent.imag
+    squares = re * re
+    size = im * im
+    diff = np.subtract(size, squares)  # im^2 - re^2
+    size += squares
+    np.sqrt(size, out=size)
+    if size.size and size.min() > 0:
+        inv = np.divide(1.0, size, out=size)
+    else:  # 1 / |p| where p != 0, else 0
+        inv = np.divide(1.0, size, out=np.zeros_like(size), where=size > 0)
+    np.multiply(diff, inv, out=real_out)
+    twice = np.multiply(re, 2.0, out=squares)
+    twice *= im
+    np.multiply(twice, inv, out=imag_out)
 
 
 def parent_features(pyramid: ComplexSteerablePyramid, band_spectra: list, lows: list, level: int):
@@ -226,18 +247,48 @@ def parent_features(pyramid: ComplexSteerablePyramid, band_spectra: list, lows: 
     ``(magnitudes (N, CK) or None, reals (N, 2CK) or (N, 5C))``.
     """
     if level < pyramid.n_scales - 1:
-        up = pyramid.ifft(
-            pyramid.resize_spectrum(band_spectra[level + 1], pyramid.sizes[level + 1], pyramid.sizes[level])
-        )
-        doubled = phase_doubled(up)
-        c, k = up.shape[:2]
-        mags = np.abs(up)  # phase doubling keeps the magnitude
-        mags = mags - mags.mean(axis=(-2, -1), keepdims=True)
-        reals = np.concatenate([doubled.real, doubled.imag], axis=1)
-        return mags.reshape(c * k, -1).T, reals.reshape(2 * c * k, -1).T
+        c, k = band_spectra[level + 1].shape[:2]
+        n = pyramid.sizes[level][0] * pyramid.sizes[level][1]
+        mags, reals = np.empty((c * k, n)), np.empty((2 * c * k, n))
+        parent_rows(pyramid, band_spectra, level, mags, reals)
+        return mags.T, reals.T
     low = pyramid.expand(lows[-1], level)  # (C, h, w)
     shifts = [low, np.roll(low, 1, -1), np.roll(low, -1, -1), np.roll(low, 1, -2), np.roll(low, -1, -2)]
     return None, np.stack(shifts, axis=1).reshape(5 * low.shape[0], -1).T
+
+
+def parent_rows(
+    pyramid: ComplexSteerablePyramid,
+    band_spectra: list,
+    level: int,
+    mags_out: np.ndarray,
+    reals_out: np.ndarray,
+) -> None:
+    """Write the regressors of :func:`parent_features` for a scale with a parent scale as rows.
+
+    The parents (``band_spectra[level + 1]`` transformed back at the size of ``level``:
+    :meth:`~texsyn.transforms.complex_steerable.ComplexSteerablePyramid.upsampled_ifft`)
+    are computed band by band (:func:`for_each_band`); their centred magnitudes go into
+    ``mags_out`` ``(CK, hw)``, the phase-doubled bands' real and imaginary parts into
+    ``reals_out`` ``(2CK, hw)`` (per channel: the K real parts, then the K imaginary parts;
+    ``reals_out`` may be single precision).
+    """
+    spec = band_spectra[level + 1]
+    c, k = spec.shape[:2]
+    flat = spec.reshape((c * k,) + spec.shape[-2:])
+    parts = reals_out.reshape(c, 2, k, -1)
+
+    def run(bands: slice) -> None:
+        up = pyramid.upsampled_ifft(flat[bands], level).reshape(bands.stop - bands.start, -1)
+        mags = mags_out[bands]
+        np.abs(up, out=mags)  # phase doubling keeps the magnitude
+        mags -= mags.mean(axis=-1, keepdims=True)
+        for ci in range(bands.start // k, (bands.stop - 1) // k + 1):  # the channels in the slice
+            first, stop = max(bands.start, ci * k) - ci * k, min(bands.stop, (ci + 1) * k) - ci * k
+            rows = up[ci * k + first - bands.start : ci * k + stop - bands.start]
+            phase_doubled_parts(rows, parts[ci, 0, first:stop], parts[ci, 1, first:stop])
+
+    for_each_band(run, c * k, mags_out.shape[1])
 
 
 def pixel_statistics(channels: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -2,11 +2,17 @@
 
 J. Portilla, E. Simoncelli, IJCV 40(1), 2000, section 4: each set of statistics is imposed
 by the smallest change that reaches it (a gradient step along the statistic for skewness and
-kurtosis, a linear transform for covariances, a filter for auto-correlations). The names in
+kurtosis, :mod:`texsyn.models.portilla_moments`; a linear transform for covariances; a
+filter for auto-correlations). The names in
 parentheses are those of the authors' reference code. The statistics themselves are in
 :mod:`texsyn.models.portilla`; the order in which one synthesis iteration applies these
 projections is :func:`texsyn.methods.portilla_simoncelli.project_statistics`
 (``docs/methods/portilla_simoncelli.md``).
+
+Why this module is long: next to each projection's public form, the synthesis loop uses a
+form that works on rows filled in place, band by band, and transforms that skip the zero
+lines of their inputs (issue 20, "Performance" in the method's page); both give the same
+bytes and are kept together so that they stay so (``tests/test_portilla_fast_paths.py``).
 """
 
 from __future__ import annotations
@@ -16,11 +22,18 @@ import functools
 import numpy as np
 import scipy.fft as sfft
 
+from ..transforms.complex_steerable import fft_workers, for_each_band, inverse_norm
 from .portilla import PSStatistics
+from .portilla_moments import FLAT_VARIANCE as FLAT_VARIANCE  # re-exported (round 1's home)
+from .portilla_moments import impose_kurtosis, impose_skewness
+from .portilla_moments import is_flat as is_flat
 
 __all__ = [
     "adjust_correlation",
     "adjust_cross_correlation",
+    "adjust_cross_correlation_rows",
+    "centred_magnitudes",
+    "filter_autocorrelation",
     "fit_window",
     "impose_autocorrelation",
     "impose_kurtosis",
@@ -29,6 +42,10 @@ __all__ = [
     "impose_parent_regression",
     "impose_pixel_statistics",
     "impose_skewness",
+    "adjusted_magnitudes",
+    "magnitude_real_parts",
+    "parent_regression_rows",
+    "real_part_of_product",
     "shrink_highpass",
     "shrink_image_highpass",
 ]
@@ -41,21 +58,37 @@ def impose_autocorrelation(x: np.ndarray, target: np.ndarray) -> np.ndarray:
     ``(c_x * c_h)(t) = target(t)`` on the window, then multiplies the spectrum of ``x`` by
     ``sqrt(|FT c_h|)``. Batched: ``x`` is ``(..., h, w)`` and ``target`` ``(..., a, a)``.
     """
-    x = np.asarray(x, dtype=np.float64)
+    return np.asarray(filter_autocorrelation(np.asarray(x, dtype=np.float64), target), dtype=np.float64)
+
+
+def filter_autocorrelation(x: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """:func:`impose_autocorrelation` without the final conversion to double precision.
+
+    With a window wider than one pixel the filtering runs in single precision (``x`` is
+    rounded to it) and its result is returned as such; the synthesis adds it to double
+    precision values, which widens it exactly as the conversion would.
+    """
     h, w = x.shape[-2:]
     batch = x.shape[:-2]
     lag = (target.shape[-1] - 1) // 2
     if lag == 0:
+        x = np.asarray(x, dtype=np.float64)
         cur = np.mean(x**2, axis=(-2, -1), keepdims=True)
         return x * np.sqrt(target[..., :1, :1] / np.where(cur > 0, cur, 1.0))
-    spec = sfft.rfft2(x.astype(np.float32))
-    cx = sfft.irfft2(spec.real**2 + spec.imag**2, s=(h, w)).astype(np.float64) / (h * w)
+    workers = fft_workers(x.size)
+    spec = sfft.rfft2(np.asarray(x, dtype=np.float32), workers=workers)
+    power = np.square(spec.real)
+    power += np.square(spec.imag)
     half = _half_offsets(lag)
     diff = half[:, None, :] - half[None, :, :]
     summ = half[:, None, :] + half[None, :, :]
     nonzero = np.any(half != 0, axis=1)
-    a = cx[..., diff[..., 0] % h, diff[..., 1] % w]
-    a = a + np.where(nonzero[None, :], cx[..., summ[..., 0] % h, summ[..., 1] % w], 0.0)
+    rows, cx = _autocorrelation_rows(
+        power, np.concatenate([diff[..., 0].ravel(), summ[..., 0].ravel()]), h, w
+    )
+    at = np.searchsorted(rows, diff[..., 0] % h), np.searchsorted(rows, summ[..., 0] % h)
+    a = cx[..., at[0], diff[..., 1] % w]
+    a = a + np.where(nonzero[None, :], cx[..., at[1], summ[..., 1] % w], 0.0)
     b = target[..., half[:, 0] + lag, half[:, 1] + lag]
     try:
         coef = np.linalg.solve(a, b[..., None])[..., 0]
@@ -66,11 +99,47 @@ def impose_autocorrelation(x: np.ndarray, target: np.ndarray) -> np.ndarray:
                 for ai, bi in zip(a.reshape((-1,) + a.shape[-2:]), b.reshape(-1, b.shape[-1]))
             ]
         ).reshape(b.shape)
-    ch = np.zeros(batch + (h, w))
-    ch[..., half[:, 0] % h, half[:, 1] % w] = coef
-    ch[..., -half[:, 0] % h, -half[:, 1] % w] = coef
-    gain = np.sqrt(np.abs(sfft.rfft2(ch.astype(np.float32)).real))
-    return sfft.irfft2(spec * gain, s=(h, w)).astype(np.float64)
+    gain = np.sqrt(np.abs(_symmetric_filter_spectrum(coef, half, batch, h, w).real))
+    spec *= gain
+    return sfft.irfft2(spec, s=(h, w), workers=workers)
+
+
+def _autocorrelation_rows(
+    power: np.ndarray, lags: np.ndarray, h: int, w: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Rows ``lags % h`` of ``irfft2(power, s=(h, w)).astype(float64) / (h w)``: ``(rows, values)``.
+
+    ``irfft2`` transforms along the columns, then along the rows (scaled by ``1 / (h w)``, a
+    product after the transform); the auto-correlation window needs a few rows, so the
+    second pass runs on those only. Same bytes as the full transform.
+    """
+    rows = np.unique(lags % h)
+    workers = fft_workers(2 * power.size)
+    columns = sfft.ifft(power + 0.0j, axis=-2, norm="forward", overwrite_x=True, workers=workers)
+    values = sfft.irfft(columns[..., rows, :], n=w, axis=-1, norm="forward", workers=workers)
+    values *= inverse_norm(h * w, values.dtype)
+    return rows, values.astype(np.float64) / (h * w)
+
+
+def _symmetric_filter_spectrum(
+    coef: np.ndarray, half: np.ndarray, batch: tuple, h: int, w: int
+) -> np.ndarray:
+    """``rfft2`` of the single-precision ``(h, w)`` filters with ``coef`` at the lags ``+/- half``.
+
+    The filters are zero outside the ``2 lag + 1`` rows of their window, so the first pass
+    of ``rfft2`` (real transforms along the rows) runs on those rows only; the second (along
+    the columns) is ``rfft2``'s own. The transform of a zero row is zero, so the result is
+    ``rfft2``'s but for the sign of zeros, which the gain's ``abs`` removes.
+    """
+    rows_pos, rows_neg = half[:, 0] % h, -half[:, 0] % h
+    rows = np.unique(np.concatenate([rows_pos, rows_neg]))
+    ch = np.zeros(batch + (rows.size, w), dtype=np.float32)  # the used rows only
+    ch[..., np.searchsorted(rows, rows_pos), half[:, 1] % w] = coef
+    ch[..., np.searchsorted(rows, rows_neg), -half[:, 1] % w] = coef
+    workers = fft_workers(int(np.prod(batch)) * h * w)
+    spec = np.zeros(batch + (h, w // 2 + 1), dtype=np.complex64)
+    spec[..., rows, :] = sfft.rfft(ch, axis=-1, workers=workers)
+    return sfft.fft(spec, axis=-2, overwrite_x=True, workers=workers)
 
 
 @functools.cache
@@ -78,133 +147,6 @@ def _half_offsets(lag: int) -> np.ndarray:
     """Lags ``(i, j)`` of a ``(2 lag + 1)^2`` window, one of each ``+/-`` pair, zero first."""
     pairs = [(i, j) for i in range(-lag, lag + 1) for j in range(-lag, lag + 1) if (i, j) >= (0, 0)]
     return np.array(pairs, dtype=np.int64)
-
-
-def _closest_lambda(num, den, target, power, scale):
-    """The step (0 included) whose moment ratio ``num / den^power`` is closest to ``target``."""
-    grid = np.concatenate([[0.0], np.linspace(-4.0, 4.0, 4001) * scale])
-    values = (
-        np.polynomial.polynomial.polyval(grid, num) / np.polynomial.polynomial.polyval(grid, den) ** power
-    )
-    return grid[np.argmin(np.abs(values - target))]
-
-
-#: variance, relative to ``max(1, mean^2)``, below which a band is flat: its skewness and
-#: kurtosis are rounding noise (a one-pixel or constant image), and are left alone
-FLAT_VARIANCE = 1e-20
-
-
-def is_flat(variance: float, mean: float) -> bool:
-    """Whether a band of this variance and mean has no shape to impose moments on."""
-    return not variance > FLAT_VARIANCE * max(1.0, float(mean) ** 2)
-
-
-def _monotone_interval(num, den, power) -> tuple[float, float]:
-    """The interval around ``l = 0`` on which ``num(l) / den(l)^(power/2)`` is monotone.
-
-    Its ends are the critical points nearest to 0 on either side (``-inf``/``inf`` where
-    there is none): the roots of ``num' den - (power/2) num den'``, the numerator of the
-    ratio's derivative.
-    """
-    num = np.polynomial.Polynomial(num)
-    den = np.polynomial.Polynomial(den)
-    roots = (num.deriv() * den - (power / 2.0) * num * den.deriv()).roots()
-    real = roots[np.abs(roots.imag) < 1e-6 * np.maximum(1.0, np.abs(roots.real))].real
-    below, above = real[real < 0], real[real > 0]
-    return (below.max() if below.size else -np.inf), (above.min() if above.size else np.inf)
-
-
-def _solve_lambda(coeffs_num, coeffs_den, target, power):
-    """The step ``l`` of ``modskew`` / ``modkurt`` (Portilla and Simoncelli 2000, section 4).
-
-    The root of ``num(l)^2 = target^2 den(l)^power`` (sign of num = sign of target) of smallest
-    ``|l|`` within the interval around 0 where the moment ratio is monotone
-    (:func:`_monotone_interval`). A root beyond the ratio's nearest extremum exists when the
-    ratio turns back (a skewed band asked for a lower kurtosis than its extremum); reaching it
-    moves ``l g`` far enough to dominate the band (a cubic of its values: the skewness lost,
-    the high-pass energy multiplied), so the extremum nearest the target is taken instead,
-    as the reference code saturates an unreachable moment. ``None`` when the target is
-    unreachable and the ratio has no extremum.
-    """
-    num = np.polynomial.Polynomial(coeffs_num)
-    den = np.polynomial.Polynomial(coeffs_den)
-    if power == 3:  # skewness: num / den^1.5 = t  ->  num^2 - t^2 den^3 = 0, sign(num) = sign(t)
-        poly = num**2 - target**2 * den**3
-    else:  # kurtosis: num / den^2 = t  ->  num - t den^2 = 0
-        poly = num - target * den**2
-    roots = poly.roots()
-    real = roots[np.abs(roots.imag) < 1e-6 * np.maximum(1.0, np.abs(roots.real))].real
-    if power == 3:
-        real = real[np.sign(num(real)) == np.sign(target)] if target != 0 else real
-    low, high = _monotone_interval(coeffs_num, coeffs_den, power)
-    real = real[(real >= low) & (real <= high)]
-    if real.size:
-        return real[np.argmin(np.abs(real))]
-    ends = np.array([end for end in (low, high) if np.isfinite(end)])
-    if ends.size == 0:
-        return None
-    return ends[np.argmin(np.abs(num(ends) / den(ends) ** (power / 2.0) - target))]
-
-
-def impose_skewness(x: np.ndarray, target: float) -> np.ndarray:
-    """Move ``x`` along the skewness gradient until its skewness is ``target`` (``modskew``).
-
-    ``y = x + l (d^2 - (m3/m2) d - m2)`` (``d`` = centred ``x``): the direction is orthogonal to
-    the mean and to ``d``, so mean and variance change only to second order and are restored.
-    The skewness of ``y`` is a ratio of polynomials in ``l`` whose coefficients are moments;
-    the root of smallest ``|l|`` is taken.
-    """
-    mean = x.mean()
-    d = (x - mean).ravel()
-    d2 = d * d
-    m2 = d2.mean()
-    if is_flat(m2, mean):
-        return x
-    m3 = np.dot(d2, d) / d.size
-    g = d2 - (m3 / m2) * d - m2
-    g2 = g * g
-    num = [m3, 3 * np.dot(d2, g) / d.size, 3 * np.dot(d, g2) / d.size, np.dot(g2, g) / d.size]
-    den = [m2, 2 * np.dot(d, g) / d.size, g2.mean()]
-    lam = _solve_lambda(num, den, target, 3)
-    if lam is None:  # unreachable target: go to the closest reachable skewness instead
-        lam = _closest_lambda(num, den, target, 1.5, np.sqrt(m2 / max(den[2], 1e-300)))
-    y = d + lam * g
-    y *= np.sqrt(m2 / np.mean(y * y))
-    return (y + mean).reshape(x.shape)
-
-
-def impose_kurtosis(x: np.ndarray, target: float) -> np.ndarray:
-    """Move ``x`` along the kurtosis gradient until its kurtosis is ``target`` (``modkurt``).
-
-    ``y = x + l g`` with ``g`` the part of ``d^3`` orthogonal to ``1, d, d^2`` (normal equations
-    from the moments), so that mean, variance and skewness change only to second order; the
-    mean and variance are restored exactly.
-    """
-    mean = x.mean()
-    d = (x - mean).ravel()
-    n = d.size
-    d2 = d * d
-    d3 = d2 * d
-    m = [1.0, 0.0, d2.mean(), d3.mean(), np.dot(d2, d2) / n, np.dot(d3, d2) / n, np.dot(d3, d3) / n]
-    if is_flat(m[2], mean):
-        return x
-    gram = np.array([[m[i + j] for j in range(3)] for i in range(3)])
-    rhs = np.array([m[3], m[4], m[5]])
-    try:
-        coef = np.linalg.solve(gram, rhs)
-    except np.linalg.LinAlgError:
-        coef = np.linalg.lstsq(gram, rhs, rcond=None)[0]
-    g = d3 - coef[0] - coef[1] * d - coef[2] * d2
-    g2 = g * g
-    num = [m[4], 4 * np.dot(d3, g) / n, 6 * np.dot(d2, g2) / n, 4 * np.dot(d, g2 * g) / n, np.dot(g2, g2) / n]
-    den = [m[2], 2 * np.dot(d, g) / n, g2.mean()]
-    lam = _solve_lambda(num, den, target, 4)
-    if lam is None:
-        lam = _closest_lambda(num, den, target, 2.0, np.sqrt(m[2] / max(den[2], 1e-300)))
-    y = d + lam * g
-    y -= y.mean()
-    y *= np.sqrt(m[2] / np.mean(y * y))
-    return (y + mean).reshape(x.shape)
 
 
 def _sqrtm(c: np.ndarray, inverse: bool = False) -> np.ndarray:
@@ -233,8 +175,16 @@ def adjust_cross_correlation(
     The part of ``x`` explained by ``y`` is replaced by the target regression and the
     residual is rescaled to the target residual covariance (clipped to be positive).
     """
-    n, k = x.shape
     rows = np.concatenate([x.T, y.T], axis=0)  # (k + m, N), contiguous rows for BLAS
+    return adjust_cross_correlation_rows(rows, x.shape[1], target, target_xy).T
+
+
+def adjust_cross_correlation_rows(
+    rows: np.ndarray, k: int, target: np.ndarray, target_xy: np.ndarray
+) -> np.ndarray:
+    """:func:`adjust_cross_correlation` on rows: ``rows`` ``(k + m, N)`` holds ``x^T`` then
+    ``y^T`` (double precision, C order); returns the new ``x^T`` ``(k, N)``."""
+    n = rows.shape[1]
     gram = rows @ rows.T / n
     bxx, bxy, byy = gram[:k, :k], gram[:k, k:], gram[k:, k:]
     ibyy = np.linalg.pinv(byy)
@@ -243,7 +193,9 @@ def adjust_cross_correlation(
     desired = target - target_xy @ ibyy @ target_xy.T
     m = _sqrtm(current, inverse=True) @ _sqrtm(desired)
     # (x - y regression) m + y ibyy target_xy^T, with two products of N-column matrices
-    return (m.T @ rows[:k] + (ibyy @ target_xy.T - regression @ m).T @ rows[k:]).T
+    out = m.T @ rows[:k]
+    out += (ibyy @ target_xy.T - regression @ m).T @ rows[k:]
+    return out
 
 
 def fit_window(target: np.ndarray, shape: tuple[int, int], lags: int) -> np.ndarray:
@@ -278,14 +230,18 @@ def impose_lowpass_statistics(
     active = target_var / np.maximum(pixel_var, 1e-300) > 1e-4
     out = np.array(images, dtype=np.float64)
     if active.any():
-        out[active] = impose_autocorrelation(out[active], window[active])
-    for c in range(out.shape[0]):
-        if active[c]:
-            out[c] = impose_kurtosis(impose_skewness(out[c], skew_kurt[c, 0]), skew_kurt[c, 1])
-        else:
-            current = np.mean((out[c] - out[c].mean()) ** 2)
-            if current > 0:
-                out[c] *= np.sqrt(target_var[c] / current)
+        out[active] = filter_autocorrelation(out[active], window[active])
+
+    def run(channels: slice) -> None:
+        for c in range(channels.start, channels.stop):
+            if active[c]:
+                out[c] = impose_kurtosis(impose_skewness(out[c], skew_kurt[c, 0]), skew_kurt[c, 1])
+            else:
+                current = np.mean((out[c] - out[c].mean()) ** 2)
+                if current > 0:
+                    out[c] *= np.sqrt(target_var[c] / current)
+
+    for_each_band(run, out.shape[0], out.shape[-1] * out.shape[-2])  # channel by channel
     return out
 
 
@@ -293,8 +249,15 @@ def impose_parent_regression(reals: np.ndarray, parents: np.ndarray, target_xp: 
     """Give every column of ``reals`` (N, k) its target correlation ``target_xp`` (k, m) with
     ``parents`` (N, m), keeping its variance (paper section 4: the real parts against the
     phase-doubled parents; computed in single precision like the synthesis pyramid)."""
-    n, k = reals.shape
     rows = np.concatenate([reals.T, parents.T], axis=0).astype(np.float32)  # (k + m, N)
+    return parent_regression_rows(rows, reals.shape[1], target_xp).T.astype(np.float64)
+
+
+def parent_regression_rows(rows: np.ndarray, k: int, target_xp: np.ndarray) -> np.ndarray:
+    """:func:`impose_parent_regression` on single-precision rows: ``rows`` ``(k + m, N)``
+    holds the reals' transpose then the parents'; returns the new reals' transpose ``(k, N)``,
+    written over ``rows[:k]``."""
+    n = rows.shape[1]
     gram = (rows @ rows.T).astype(np.float64) / n
     own = np.diag(gram)[:k]
     cross = gram[k:, :k]  # (m, k): parents^T reals / n
@@ -305,7 +268,11 @@ def impose_parent_regression(reals: np.ndarray, parents: np.ndarray, target_xp: 
     desired = np.maximum(own - np.einsum("km,mk->k", target_xp, fit), 0.0)
     scale = np.sqrt(desired / np.where(current > 0, current, 1.0))
     mix = (fit - regression * scale).T.astype(np.float32)
-    return (rows[:k] * scale[:, None].astype(np.float32) + mix @ rows[k:]).T.astype(np.float64)
+    fitted = mix @ rows[k:]
+    out = rows[:k]
+    out *= scale[:, None].astype(np.float32)
+    out += fitted
+    return out
 
 
 def impose_magnitude_statistics(
@@ -320,19 +287,101 @@ def impose_magnitude_statistics(
     """
     c, k = band.shape[:2]
     n = band.shape[-1] * band.shape[-2]
-    current = np.abs(band)
-    mags = current - current.mean(axis=(-2, -1), keepdims=True)
-    m = mags.reshape(c * k, n).T
     if parent_magnitudes is None:
-        m = adjust_correlation(m, target.magnitude_cross[level])
+        current, mags = centred_magnitudes(band)
+        filtered = adjusted_magnitudes(current, mags, None, target, level, lags)
     else:
-        m = adjust_cross_correlation(
-            m, target.magnitude_cross[level], parent_magnitudes, target.magnitude_parent[level]
+        rows = np.empty((c * k + parent_magnitudes.shape[1], n))
+        current, _ = centred_magnitudes(band, rows[: c * k].reshape(band.shape))
+        rows[c * k :] = parent_magnitudes.T
+        filtered = adjusted_magnitudes(current, None, rows, target, level, lags)
+    ratio = np.add(filtered, target.magnitude_means[level][..., None, None], dtype=np.float64)
+    np.maximum(ratio, 0.0, out=ratio)
+    return band * (ratio / np.where(current > 0, current, 1.0))
+
+
+def centred_magnitudes(band: np.ndarray, out: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """``(|band|, |band| - its mean over each band)`` for bands ``(..., h, w)``, the second
+    written into ``out`` if given (band by band: :func:`~texsyn.transforms.complex_steerable.for_each_band`)."""
+    h, w = band.shape[-2:]
+    current = np.empty(band.shape, dtype=band.real.dtype)
+    centred = np.empty(band.shape, dtype=current.dtype) if out is None else out
+    flat, mags, result = (a.reshape(-1, h * w) for a in (band, current, centred))
+
+    def run(bands: slice) -> None:
+        np.abs(flat[bands], out=mags[bands])
+        np.subtract(mags[bands], mags[bands].mean(axis=-1, keepdims=True), out=result[bands])
+
+    for_each_band(run, flat.shape[0], h * w)
+    return current, centred
+
+
+def adjusted_magnitudes(
+    current: np.ndarray,
+    mags: np.ndarray | None,
+    rows: np.ndarray | None,
+    target: PSStatistics,
+    level: int,
+    lags: int,
+) -> np.ndarray:
+    """The centred magnitudes of :func:`impose_magnitude_statistics` after their covariance
+    and auto-correlation steps (single precision when the window is wider than a pixel).
+
+    ``current`` is ``|band|`` ``(C, K, h, w)``; at the coarsest scale ``mags`` holds its
+    centred magnitudes and ``rows`` is None, elsewhere ``rows`` ``(CK + M, hw)`` holds them
+    (as rows, double precision) followed by the parents' centred magnitudes.
+    """
+    c, k = current.shape[:2]
+    n = current.shape[-1] * current.shape[-2]
+    if rows is None:
+        assert mags is not None
+        m = adjust_correlation(mags.reshape(c * k, n).T, target.magnitude_cross[level]).T
+    else:
+        m = adjust_cross_correlation_rows(
+            rows, c * k, target.magnitude_cross[level], target.magnitude_parent[level]
         )
-    mags = m.T.reshape(mags.shape)
-    mags = impose_autocorrelation(mags, fit_window(target.magnitude_autocorr[level], mags.shape[-2:], lags))
-    magnitude = np.maximum(mags + target.magnitude_means[level][..., None, None], 0.0)
-    return band * (magnitude / np.where(current > 0, current, 1.0))
+    window = fit_window(target.magnitude_autocorr[level], current.shape[-2:], lags)
+    return filter_autocorrelation(m.reshape(current.shape), window)
+
+
+def magnitude_real_parts(
+    band: np.ndarray, current: np.ndarray, filtered: np.ndarray, means: np.ndarray, out: np.ndarray
+) -> np.ndarray:
+    """The real parts of :func:`impose_magnitude_statistics`'s result, written into ``out``.
+
+    Band by band: the new magnitude ``max(filtered + mean, 0)`` over the old ``current``
+    (0 where the band is 0) multiplies the band's real part (:func:`real_part_of_product`).
+    ``means`` is ``(C, K)``; ``out`` may be single precision (the product is rounded once).
+    """
+    h, w = band.shape[-2:]
+    flat, cur, new, res = (a.reshape(-1, h * w) for a in (band, current, filtered, out))
+    mean = np.asarray(means, dtype=np.float64).reshape(-1)
+
+    def run(bands: slice) -> None:
+        ratio = np.add(new[bands], mean[bands, None], dtype=np.float64)
+        np.maximum(ratio, 0.0, out=ratio)
+        if cur[bands].min() > 0:
+            np.divide(ratio, cur[bands], out=ratio)
+        else:
+            np.divide(ratio, np.where(cur[bands] > 0, cur[bands], 1.0), out=ratio)
+        real_part_of_product(flat[bands], ratio, res[bands])
+
+    for_each_band(run, flat.shape[0], h * w)
+    return out
+
+
+def real_part_of_product(band: np.ndarray, ratio: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """``(band * ratio).real`` (complex times real) written into ``out``, without the complex product.
+
+    The complex product's real part is ``re ratio - im 0``: the same number as
+    ``re ratio`` except when that is a zero, whose sign the ``- im 0`` may flip; those
+    entries are taken from the complex product itself.
+    """
+    np.multiply(band.real, ratio, out=out)
+    zero = out == 0
+    if zero.any():
+        out[zero] = (band[zero] * ratio[zero]).real
+    return out
 
 
 def shrink_highpass(highpass: np.ndarray, target_variance: np.ndarray) -> np.ndarray:
@@ -388,9 +437,13 @@ def impose_pixel_statistics(x: np.ndarray, target: PSStatistics) -> np.ndarray:
     flat = x.reshape(c, -1)
     centred = (flat - flat.mean(axis=1, keepdims=True)).T
     flat = adjust_correlation(centred, target.colour_covariance).T + mean0[:, None]
-    for ci in range(c):
-        if var0[ci] > 0:
-            flat[ci] = impose_skewness(flat[ci], target.pixel_moments[ci, 2])
-            flat[ci] = impose_kurtosis(flat[ci], target.pixel_moments[ci, 3])
+
+    def run(channels: slice) -> None:
+        for ci in range(channels.start, channels.stop):
+            if var0[ci] > 0:
+                flat[ci] = impose_skewness(flat[ci], target.pixel_moments[ci, 2])
+                flat[ci] = impose_kurtosis(flat[ci], target.pixel_moments[ci, 3])
+
+    for_each_band(run, c, flat.shape[1])  # channel by channel
     flat = np.clip(flat, target.pixel_range[:, :1], target.pixel_range[:, 1:])
     return flat.reshape(x.shape)

@@ -18,12 +18,86 @@ finest first (``docs/methods/portilla_simoncelli.md``).
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
+
 import numpy as np
 import scipy.fft as sfft
 
+from ..ops.linalg import worker_count
 from .steerable import crop_indices, oriented_windows, pyramid_sizes, radial_lowpass
 
-__all__ = ["ComplexSteerablePyramid"]
+__all__ = ["ComplexSteerablePyramid", "fft_workers", "for_each_band", "inverse_norm"]
+
+
+@functools.cache
+def _crop_runs(n_fine: int, n_coarse: int) -> list[tuple[slice, slice]]:
+    """:func:`_runs` of ``crop_indices(n_fine, n_coarse)`` (cached)."""
+    return _runs(crop_indices(n_fine, n_coarse))
+
+
+def _runs(indices: np.ndarray) -> list[tuple[slice, slice]]:
+    """The contiguous runs of an index array: ``(slice of the indexed axis, slice of indices)``.
+
+    :func:`~texsyn.transforms.steerable.crop_indices` gives two runs (the non-negative and the
+    negative frequencies): copying them as slices moves the same values as fancy indexing,
+    without its gather.
+
+    Examples
+    --------
+    >>> _runs(np.array([0, 1, 6, 7]))
+    [(slice(0, 2, None), slice(0, 2, None)), (slice(6, 8, None), slice(2, 4, None))]
+    """
+    cuts = np.flatnonzero(np.diff(indices) != 1) + 1
+    starts = np.concatenate([[0], cuts])
+    stops = np.concatenate([cuts, [len(indices)]])
+    return [
+        (slice(int(indices[a]), int(indices[b - 1]) + 1), slice(int(a), int(b)))
+        for a, b in zip(starts, stops)
+    ]
+
+
+def inverse_norm(n: int, dtype) -> np.ndarray:
+    """pocketfft's ``1 / n`` normalisation factor, a 0-d array of ``dtype``: computed in long
+    double, then rounded once (``norm_fct`` of scipy's ``pypocketfft``)."""
+    return np.asarray(np.longdouble(1) / np.longdouble(n)).astype(dtype)
+
+
+#: bands of this many pixels or more are processed one at a time
+_BAND_BY_BAND = 1 << 14
+#: FFTs of this many values or more use every CPU of the process
+_THREADED_FFT = 1 << 17
+
+
+def fft_workers(size: int) -> int:
+    """Threads for an FFT of ``size`` values: every CPU of the process from :data:`_THREADED_FFT`
+    values, else one.
+
+    pocketfft transforms each line on one thread, the same way whichever, so the bytes do not
+    depend on the number of threads (``docs/determinism.md``). Measured on the 2-core
+    benchmark machine, two threads take 20-35 % off the transforms of a 256x256 pyramid level
+    (12 bands) but make transforms of a few 10^4 values slower.
+    """
+    return worker_count() if size >= _THREADED_FFT else 1
+
+
+def for_each_band(function: Callable[[slice], None], count: int, size: int) -> None:
+    """Call ``function(bands)`` on slices ``bands`` that cover ``range(count)``.
+
+    Bands of ``size`` pixels or more go one at a time: a chain of NumPy operations on one
+    band stays in the processor's cache, which a whole pyramid level does not fit (measured:
+    the phase doubling of twelve 256x256 bands takes half the time band by band). Smaller
+    bands go all at once (fewer Python and FFT call overheads). ``function`` must compute
+    each band the same way whatever the slice, so that the bytes do not depend on it.
+
+    Threads were tried (the bands shared among texsyn's threads): on the 2-core benchmark
+    machine they burnt 40 % more CPU for no shorter run.
+    """
+    if size < _BAND_BY_BAND:
+        function(slice(0, count))
+        return
+    for i in range(count):
+        function(slice(i, i + 1))
 
 
 class ComplexSteerablePyramid:
@@ -66,6 +140,7 @@ class ComplexSteerablePyramid:
         self.lo0 = radial_lowpass(r0 / 2.0)
         self.hi0 = np.sqrt(np.maximum(1.0 - self.lo0**2, 0.0))
         self.lo, self.real_filters, self.analytic_filters, self.half_planes = [], [], [], []
+        self.conj_real_filters = []  # np.conj(real_filters[s]), kept for reconstruct_level
         for size in self.sizes[: self.n_scales]:
             r, theta = self._polar(size)
             lo = radial_lowpass(r)
@@ -78,6 +153,7 @@ class ComplexSteerablePyramid:
             rd, cd = self.real_dtype, np.result_type(self.real_dtype, np.complex64)
             self.lo.append(lo.astype(rd))
             self.real_filters.append(reals.astype(cd))
+            self.conj_real_filters.append(np.conj(self.real_filters[-1]))
             self.analytic_filters.append(analytic.astype(cd))
             self.half_planes.append(halves.astype(rd))
         self.lo0 = self.lo0.astype(self.real_dtype)
@@ -93,14 +169,17 @@ class ComplexSteerablePyramid:
             self.mid.append(self.lo[level][rows[:, None], cols[None, :]])
 
     def fft(self, x: np.ndarray) -> np.ndarray:
-        """2-D FFT over the last two axes, in the pyramid's precision (``single`` or double)."""
+        """2-D FFT over the last two axes, in the pyramid's precision (``single`` or double).
+
+        Large transforms use several threads (:func:`fft_workers`; same bytes).
+        """
         x = np.asarray(x)
         dtype = np.result_type(self.real_dtype, np.complex64) if np.iscomplexobj(x) else self.real_dtype
-        return sfft.fft2(x.astype(dtype, copy=False))
+        return sfft.fft2(x.astype(dtype, copy=False), workers=fft_workers(x.size))
 
     def ifft(self, x: np.ndarray) -> np.ndarray:
-        """Inverse 2-D FFT over the last two axes (complex result)."""
-        return sfft.ifft2(x)
+        """Inverse 2-D FFT over the last two axes (complex result; threads as :meth:`fft`)."""
+        return sfft.ifft2(x, workers=fft_workers(x.size))
 
     @staticmethod
     def _polar(shape):
@@ -112,15 +191,61 @@ class ComplexSteerablePyramid:
     def resize_spectrum(spec: np.ndarray, size_from, size_to) -> np.ndarray:
         """Crop or zero-pad a full 2-D spectrum (last two axes), keeping amplitudes."""
         scale = (size_to[0] * size_to[1]) / (size_from[0] * size_from[1])
+        shape = spec.shape[:-2] + tuple(size_to)
         if size_to[0] <= size_from[0]:
-            rows = crop_indices(size_from[0], size_to[0])
-            cols = crop_indices(size_from[1], size_to[1])
-            return spec[..., rows[:, None], cols[None, :]] * scale
-        rows = crop_indices(size_to[0], size_from[0])
-        cols = crop_indices(size_to[1], size_from[1])
-        out = np.zeros(spec.shape[:-2] + tuple(size_to), dtype=complex)
-        out[..., rows[:, None], cols[None, :]] = spec * scale
+            rows = _crop_runs(size_from[0], size_to[0])
+            cols = _crop_runs(size_from[1], size_to[1])
+            out = np.empty(shape, dtype=np.result_type(spec.dtype, scale))
+            for fine_r, coarse_r in rows:
+                for fine_c, coarse_c in cols:
+                    np.multiply(spec[..., fine_r, fine_c], scale, out=out[..., coarse_r, coarse_c])
+            return out
+        rows = _crop_runs(size_to[0], size_from[0])
+        cols = _crop_runs(size_to[1], size_from[1])
+        out = np.zeros(shape, dtype=complex)
+        for fine_r, coarse_r in rows:
+            for fine_c, coarse_c in cols:
+                # the product in the spectrum's own precision, then widened (as ``spec * scale``)
+                np.multiply(spec[..., coarse_r, coarse_c], scale, out=out[..., fine_r, fine_c])
         return out
+
+    def upsampled_ifft(self, spec: np.ndarray, level: int) -> np.ndarray:
+        """``ifft(resize_spectrum(spec, sizes[level + 1], sizes[level]))``, the same bytes, faster.
+
+        The zero-padded spectrum's columns outside the coarse frequencies are zero, so the
+        first pass of the 2-D inverse transform (along the columns, scaled by ``1 / (h w)``
+        as pocketfft scales it: a product after the transform) runs on the coarse columns
+        only; a zero column's transform (zeros whose signs pocketfft's arithmetic sets) is
+        computed once and copied. The second pass (along the rows) is the 2-D transform's own.
+        """
+        (hc, wc), (h, w) = self.sizes[level + 1], self.sizes[level]
+        scale = (h * w) / (hc * wc)
+        workers = fft_workers(spec.size * (h * w) // (hc * wc))
+        batch = spec.shape[:-2]
+        columns = np.empty(batch + (h, wc + 1), dtype=complex)  # the coarse columns, then a zero one
+        columns[..., wc] = 0.0
+        rows = _crop_runs(h, hc)
+        for (fine_r, coarse_r), (next_r, _) in zip(rows, rows[1:] + [(slice(h, h), None)]):
+            np.multiply(spec[..., coarse_r, :], scale, out=columns[..., fine_r, :wc])
+            columns[..., fine_r.stop : next_r.start, :wc] = 0.0  # the zero padding between the runs
+        columns[..., : rows[0][0].start, :wc] = 0.0
+        columns = sfft.ifft(columns, axis=-2, norm="forward", overwrite_x=True, workers=workers)
+        # scale by 1 / (h w) as pocketfft does (real and imaginary parts by a real factor) while
+        # copying into the full array, whose other columns are the zero column's transform
+        norm = inverse_norm(h * w, np.float64)
+        out = np.empty(batch + (h, w), dtype=complex)
+        source, target = columns.view(np.float64), out.view(np.float64)
+        previous = 0
+        for fine_c, coarse_c in _crop_runs(w, wc):
+            out[..., previous : fine_c.start] = columns[..., wc : wc + 1]
+            np.multiply(
+                source[..., 2 * coarse_c.start : 2 * coarse_c.stop],
+                norm,
+                out=target[..., 2 * fine_c.start : 2 * fine_c.stop],
+            )
+            previous = fine_c.stop
+        out[..., previous:] = columns[..., wc : wc + 1]
+        return sfft.ifft(out, axis=-1, norm="forward", overwrite_x=True, workers=workers)
 
     def expand(self, image: np.ndarray, level: int) -> np.ndarray:
         """Interpolate ``(..., h, w)`` arrays of level ``level + 1`` to the size of ``level``."""
@@ -143,18 +268,36 @@ class ComplexSteerablePyramid:
         bands, lows, band_spectra = [], [], []
         for s in range(self.n_scales):
             lows.append(self.ifft(low).real if all_lows else None)
-            band_spectra.append(low[:, None] * self.analytic_filters[s])
-            bands.append(self.ifft(band_spectra[-1]))
+            if spectra:
+                band_spectra.append(low[:, None] * self.analytic_filters[s])
+                bands.append(self.ifft(band_spectra[-1]))
+            else:
+                bands.append(self._bands(low, s))
             low = self.resize_spectrum(low * self.lo[s], self.sizes[s], self.sizes[s + 1])
         lows.append(self.ifft(low).real)
         return (highpass, bands, lows, band_spectra) if spectra else (highpass, bands, lows)
+
+    def _bands(self, low: np.ndarray, level: int) -> np.ndarray:
+        """``ifft(low[:, None] * analytic_filters[level])``, band by band (:func:`for_each_band`)."""
+        filters = self.analytic_filters[level]
+        c, k = low.shape[0], filters.shape[0]
+        out = np.empty((c, k) + low.shape[1:], dtype=np.result_type(low.dtype, filters.dtype))
+        flat = out.reshape((c * k,) + low.shape[1:])
+
+        def run(bands: slice) -> None:
+            for i in range(bands.start, bands.stop):
+                np.multiply(low[i // k], filters[i % k], out=flat[i])
+            sfft.ifft2(flat[bands], overwrite_x=True, workers=fft_workers(flat[bands].size))  # in place
+
+        for_each_band(run, c * k, low.shape[-1] * low.shape[-2])
+        return out
 
     def lowpass_image(self, residual: np.ndarray) -> np.ndarray:
         """The coarsest partially reconstructed image: the low-pass residual filtered by ``L(r/2)``."""
         return self.ifft(self.fft(residual) * self.mid[-1]).real
 
     def reconstruct_level(
-        self, coarser: np.ndarray, real_bands: np.ndarray, level: int, *, real_spectra=None
+        self, coarser: np.ndarray, real_bands: np.ndarray | None, level: int, *, real_spectra=None
     ) -> np.ndarray:
         """Partially reconstructed image of ``level`` from the one of the level below and the
         level's real bands (or their Fourier transforms ``real_spectra``).
@@ -165,9 +308,17 @@ class ComplexSteerablePyramid:
         """
         spec = self.resize_spectrum(self.fft(coarser), self.sizes[level + 1], self.sizes[level])
         if real_spectra is None:
+            if real_bands is None:
+                raise ValueError("reconstruct_level needs the real bands or their spectra")
             real_spectra = self.fft(real_bands)
-        spec = spec + np.sum(real_spectra * np.conj(self.real_filters[level]), axis=-3)
-        return self.ifft(spec * self.mid[level]).real
+        # np.sum over the orientations, in its order: ((b0 + b1) + b2) + ...
+        filters = self.conj_real_filters[level]
+        total = real_spectra[..., 0, :, :] * filters[0]
+        for b in range(1, filters.shape[0]):
+            total += real_spectra[..., b, :, :] * filters[b]
+        spec += total
+        spec *= self.mid[level]
+        return self.ifft(spec).real
 
     def reconstruct(self, low0: np.ndarray, highpass: np.ndarray) -> np.ndarray:
         """The image from the finest partially reconstructed image and the high-pass residual."""

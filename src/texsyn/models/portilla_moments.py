@@ -1,0 +1,240 @@
+"""The skewness and kurtosis steps of the Portilla–Simoncelli projections.
+
+J. Portilla, E. Simoncelli, IJCV 40(1), 2000, section 4 (the reference code's ``modskew`` and
+``modkurt``): a band is moved along the gradient of its skewness or kurtosis, with a step
+``l`` found as a root of a polynomial whose coefficients are moments of the band. The other
+projections are in :mod:`texsyn.models.portilla_projections`, which re-exports these steps
+(``docs/methods/portilla_simoncelli.md``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["FLAT_VARIANCE", "impose_kurtosis", "impose_skewness", "is_flat"]
+
+
+def _closest_lambda(num, den, target, power, scale):
+    """The step (0 included) whose moment ratio ``num / den^power`` is closest to ``target``."""
+    grid = np.concatenate([[0.0], np.linspace(-4.0, 4.0, 4001) * scale])
+    values = (
+        np.polynomial.polynomial.polyval(grid, num) / np.polynomial.polynomial.polyval(grid, den) ** power
+    )
+    return grid[np.argmin(np.abs(values - target))]
+
+
+#: variance, relative to ``max(1, mean^2)``, below which a band is flat: its skewness and
+#: kurtosis are rounding noise (a one-pixel or constant image), and are left alone
+FLAT_VARIANCE = 1e-20
+
+
+def is_flat(variance: float, mean: float) -> bool:
+    """Whether a band of this variance and mean has no shape to impose moments on."""
+    return not variance > FLAT_VARIANCE * max(1.0, float(mean) ** 2)
+
+
+# Polynomials in the step ``l`` as coefficient arrays, lowest degree first. These helpers do
+# the arithmetic of ``numpy.polynomial.Polynomial`` (same trimming of zero leading
+# coefficients, same ``np.convolve`` products, same companion matrix and eigenvalue solver,
+# same identity map of the default domain) without its per-object overhead: the skewness and
+# kurtosis steps run a few thousand times per synthesis, and the objects cost more than the
+# arithmetic. ``tests/test_portilla.py`` checks that the results are the same bits.
+_ZERO, _ONE = np.float64(0.0), np.float64(1.0)  # the default domain's map: off + scl x
+
+
+def _trim(c: np.ndarray) -> np.ndarray:
+    """``c`` without its trailing zero coefficients (at least one kept), as ``polyutils.trimseq``."""
+    if len(c) == 0 or c[-1] != 0:
+        return c
+    for i in range(len(c) - 1, -1, -1):
+        if c[i] != 0:
+            break
+    return c[: i + 1]
+
+
+def _series(c) -> np.ndarray:
+    """A trimmed float64 copy of ``c``, as ``polyutils.as_series([c])[0]``."""
+    return np.array(_trim(np.array(c, ndmin=1, copy=None)), dtype=np.float64, copy=True)
+
+
+def _poly_mul(c1, c2) -> np.ndarray:
+    """``Polynomial(c1) * Polynomial(c2)`` (``polymul``)."""
+    return _trim(np.convolve(_series(c1), _series(c2)))
+
+
+def _poly_sub(c1, c2) -> np.ndarray:
+    """``Polynomial(c1) - Polynomial(c2)`` (``polyutils._sub``)."""
+    c1, c2 = _series(c1), _series(c2)
+    if len(c1) > len(c2):
+        c1[: c2.size] -= c2
+        return _trim(c1)
+    c2 = -c2
+    c2[: c1.size] += c1
+    return _trim(c2)
+
+
+def _poly_pow(c, power: int) -> np.ndarray:
+    """``Polynomial(c) ** power`` for ``power >= 2`` (``polypow``: repeated ``np.convolve``)."""
+    c = _series(c)
+    product = c
+    for _ in range(2, power + 1):
+        product = np.convolve(product, c)
+    return product
+
+
+def _poly_der(c) -> np.ndarray:
+    """``Polynomial(c).deriv()`` (``polyder`` with scale 1)."""
+    c = np.array(c, ndmin=1, copy=True, dtype=np.float64)
+    n = len(c)
+    if n <= 1:
+        return c[:1] * 0
+    c *= _ONE
+    der = np.empty(n - 1)
+    for j in range(n - 1, 0, -1):
+        der[j - 1] = j * c[j]
+    return der
+
+
+def _poly_val(c: np.ndarray, x):
+    """``Polynomial(c)(x)``: the domain's identity map, then Horner's scheme (``polyval``)."""
+    x = _ZERO + _ONE * np.asanyarray(x)
+    c0 = c[-1] + x * 0
+    for i in range(2, len(c) + 1):
+        c0 = c[-i] + c0 * x
+    return c0
+
+
+def _poly_roots(c) -> np.ndarray:
+    """``Polynomial(c).roots()``: eigenvalues of the companion matrix, sorted (``polyroots``)."""
+    c = _series(c)
+    if len(c) < 2:
+        roots = np.array([], dtype=c.dtype)
+    elif len(c) == 2:
+        roots = np.array([-c[0] / c[1]])
+    else:
+        n = len(c) - 1
+        companion = np.zeros((n, n), dtype=c.dtype)
+        companion.reshape(-1)[n :: n + 1] = 1
+        companion[:, -1] -= c[:-1] / c[-1]
+        roots = np.linalg.eigvals(companion)
+        roots.sort()
+    return _ZERO + _ONE * roots
+
+
+def _monotone_interval(num, den, power) -> tuple[float, float]:
+    """The interval around ``l = 0`` on which ``num(l) / den(l)^(power/2)`` is monotone.
+
+    Its ends are the critical points nearest to 0 on either side (``-inf``/``inf`` where
+    there is none): the roots of ``num' den - (power/2) num den'``, the numerator of the
+    ratio's derivative.
+    """
+    num = np.array(num, dtype=np.float64)
+    den = np.array(den, dtype=np.float64)
+    derivative = _poly_sub(
+        _poly_mul(_poly_der(num), den), _poly_mul(_poly_mul([power / 2.0], num), _poly_der(den))
+    )
+    roots = _poly_roots(derivative)
+    real = roots[np.abs(roots.imag) < 1e-6 * np.maximum(1.0, np.abs(roots.real))].real
+    below, above = real[real < 0], real[real > 0]
+    return (below.max() if below.size else -np.inf), (above.min() if above.size else np.inf)
+
+
+def _solve_lambda(coeffs_num, coeffs_den, target, power):
+    """The step ``l`` of ``modskew`` / ``modkurt`` (Portilla and Simoncelli 2000, section 4).
+
+    The root of ``num(l)^2 = target^2 den(l)^power`` (sign of num = sign of target) of smallest
+    ``|l|`` within the interval around 0 where the moment ratio is monotone
+    (:func:`_monotone_interval`). A root beyond the ratio's nearest extremum exists when the
+    ratio turns back (a skewed band asked for a lower kurtosis than its extremum); reaching it
+    moves ``l g`` far enough to dominate the band (a cubic of its values: the skewness lost,
+    the high-pass energy multiplied), so the extremum nearest the target is taken instead,
+    as the reference code saturates an unreachable moment. ``None`` when the target is
+    unreachable and the ratio has no extremum.
+    """
+    num = np.array(coeffs_num, dtype=np.float64)
+    den = np.array(coeffs_den, dtype=np.float64)
+    if power == 3:  # skewness: num / den^1.5 = t  ->  num^2 - t^2 den^3 = 0, sign(num) = sign(t)
+        poly = _poly_sub(_poly_pow(num, 2), _poly_mul([target**2], _poly_pow(den, 3)))
+    else:  # kurtosis: num / den^2 = t  ->  num - t den^2 = 0
+        poly = _poly_sub(num, _poly_mul([target], _poly_pow(den, 2)))
+    roots = _poly_roots(poly)
+    real = roots[np.abs(roots.imag) < 1e-6 * np.maximum(1.0, np.abs(roots.real))].real
+    if power == 3:
+        real = real[np.sign(_poly_val(num, real)) == np.sign(target)] if target != 0 else real
+    low, high = _monotone_interval(num, den, power)
+    real = real[(real >= low) & (real <= high)]
+    if real.size:
+        return real[np.argmin(np.abs(real))]
+    ends = np.array([end for end in (low, high) if np.isfinite(end)])
+    if ends.size == 0:
+        return None
+    return ends[np.argmin(np.abs(_poly_val(num, ends) / _poly_val(den, ends) ** (power / 2.0) - target))]
+
+
+def impose_skewness(x: np.ndarray, target: float) -> np.ndarray:
+    """Move ``x`` along the skewness gradient until its skewness is ``target`` (``modskew``).
+
+    ``y = x + l (d^2 - (m3/m2) d - m2)`` (``d`` = centred ``x``): the direction is orthogonal to
+    the mean and to ``d``, so mean and variance change only to second order and are restored.
+    The skewness of ``y`` is a ratio of polynomials in ``l`` whose coefficients are moments;
+    the root of smallest ``|l|`` is taken.
+    """
+    mean = x.mean()
+    d = (x - mean).ravel()
+    d2 = d * d
+    m2 = d2.mean()
+    if is_flat(m2, mean):
+        return x
+    m3 = np.dot(d2, d) / d.size
+    g = np.multiply(d, m3 / m2)  # g = d2 - (m3 / m2) d - m2, in place
+    np.subtract(d2, g, out=g)
+    g -= m2
+    g2 = g * g
+    num = [m3, 3 * np.dot(d2, g) / d.size, 3 * np.dot(d, g2) / d.size, np.dot(g2, g) / d.size]
+    den = [m2, 2 * np.dot(d, g) / d.size, g2.mean()]
+    lam = _solve_lambda(num, den, target, 3)
+    if lam is None:  # unreachable target: go to the closest reachable skewness instead
+        lam = _closest_lambda(num, den, target, 1.5, np.sqrt(m2 / max(den[2], 1e-300)))
+    y = np.add(d, np.multiply(g, lam, out=g2), out=g2)  # d + lam g
+    y *= np.sqrt(m2 / np.mean(np.multiply(y, y, out=d2)))
+    y += mean
+    return y.reshape(x.shape)
+
+
+def impose_kurtosis(x: np.ndarray, target: float) -> np.ndarray:
+    """Move ``x`` along the kurtosis gradient until its kurtosis is ``target`` (``modkurt``).
+
+    ``y = x + l g`` with ``g`` the part of ``d^3`` orthogonal to ``1, d, d^2`` (normal equations
+    from the moments), so that mean, variance and skewness change only to second order; the
+    mean and variance are restored exactly.
+    """
+    mean = x.mean()
+    d = (x - mean).ravel()
+    n = d.size
+    d2 = d * d
+    d3 = d2 * d
+    m = [1.0, 0.0, d2.mean(), d3.mean(), np.dot(d2, d2) / n, np.dot(d3, d2) / n, np.dot(d3, d3) / n]
+    if is_flat(m[2], mean):
+        return x
+    gram = np.array([[m[i + j] for j in range(3)] for i in range(3)])
+    rhs = np.array([m[3], m[4], m[5]])
+    try:
+        coef = np.linalg.solve(gram, rhs)
+    except np.linalg.LinAlgError:
+        coef = np.linalg.lstsq(gram, rhs, rcond=None)[0]
+    g = np.subtract(d3, coef[0])  # g = d3 - coef[0] - coef[1] d - coef[2] d2, in place
+    term = np.multiply(d, coef[1])
+    g -= term
+    g -= np.multiply(d2, coef[2], out=term)
+    g2 = g * g
+    cube = np.multiply(g2, g, out=term)
+    num = [m[4], 4 * np.dot(d3, g) / n, 6 * np.dot(d2, g2) / n, 4 * np.dot(d, cube) / n, np.dot(g2, g2) / n]
+    den = [m[2], 2 * np.dot(d, g) / n, g2.mean()]
+    lam = _solve_lambda(num, den, target, 4)
+    if lam is None:
+        lam = _closest_lambda(num, den, target, 2.0, np.sqrt(m[2] / max(den[2], 1e-300)))
+    y = np.add(d, np.multiply(g, lam, out=term), out=term)  # d + lam g
+    y -= y.mean()
+    y *= np.sqrt(m[2] / np.mean(np.multiply(y, y, out=g2)))
+    y += mean
+    return y.reshape(x.shape)

@@ -1,0 +1,363 @@
+"""Portilla-Simoncelli: the optimised iteration gives the same bytes as the plain one.
+
+Issue 20 rewrote the synthesis loop for speed (rows of the regressions filled in place,
+band-by-band chains, FFT passes on the non-zero lines only, polynomial arithmetic on
+coefficient arrays, threads). This file keeps the loop as it was before, written with plain
+NumPy and ``numpy.polynomial``, and checks that the optimised loop gives the same bytes, with
+and without threads (``docs/methods/portilla_simoncelli.md``, "Performance").
+"""
+
+import functools
+
+import numpy as np
+import pytest
+import scipy.fft as sfft
+
+import texsyn
+from texsyn.methods.portilla_simoncelli import project_statistics
+from texsyn.models import portilla_moments as moments
+from texsyn.models import portilla_projections as projections
+from texsyn.transforms import complex_steerable
+from texsyn.transforms.complex_steerable import ComplexSteerablePyramid
+from texsyn.transforms.steerable import crop_indices
+
+# --------------------------------------------------------------------------- reference loop
+# The synthesis iteration of texsyn 0.x before issue 20, function by function.
+
+
+def _fft(pyramid, x):
+    x = np.asarray(x)
+    dtype = np.result_type(pyramid.real_dtype, np.complex64) if np.iscomplexobj(x) else pyramid.real_dtype
+    return sfft.fft2(x.astype(dtype, copy=False))
+
+
+def _resize(spec, size_from, size_to):
+    scale = (size_to[0] * size_to[1]) / (size_from[0] * size_from[1])
+    if size_to[0] <= size_from[0]:
+        rows = crop_indices(size_from[0], size_to[0])
+        cols = crop_indices(size_from[1], size_to[1])
+        return spec[..., rows[:, None], cols[None, :]] * scale
+    rows = crop_indices(size_to[0], size_from[0])
+    cols = crop_indices(size_to[1], size_from[1])
+    out = np.zeros(spec.shape[:-2] + tuple(size_to), dtype=complex)
+    out[..., rows[:, None], cols[None, :]] = spec * scale
+    return out
+
+
+def _forward(pyramid, x):
+    spec = _fft(pyramid, np.asarray(x, dtype=np.float64))
+    highpass = sfft.ifft2(spec * pyramid.hi0).real
+    low = spec * pyramid.lo0
+    bands, spectra = [], []
+    for s in range(pyramid.n_scales):
+        spectra.append(low[:, None] * pyramid.analytic_filters[s])
+        bands.append(sfft.ifft2(spectra[-1]))
+        low = _resize(low * pyramid.lo[s], pyramid.sizes[s], pyramid.sizes[s + 1])
+    return highpass, bands, sfft.ifft2(low).real, spectra
+
+
+def _reconstruct_level(pyramid, coarser, level, real_spectra):
+    spec = _resize(_fft(pyramid, coarser), pyramid.sizes[level + 1], pyramid.sizes[level])
+    spec = spec + np.sum(real_spectra * np.conj(pyramid.real_filters[level]), axis=-3)
+    return sfft.ifft2(spec * pyramid.mid[level]).real
+
+
+def _autocorrelation(x, target):
+    x = np.asarray(x, dtype=np.float64)
+    h, w = x.shape[-2:]
+    lag = (target.shape[-1] - 1) // 2
+    if lag == 0:
+        cur = np.mean(x**2, axis=(-2, -1), keepdims=True)
+        return x * np.sqrt(target[..., :1, :1] / np.where(cur > 0, cur, 1.0))
+    spec = sfft.rfft2(x.astype(np.float32))
+    cx = sfft.irfft2(spec.real**2 + spec.imag**2, s=(h, w)).astype(np.float64) / (h * w)
+    half = np.array([(i, j) for i in range(-lag, lag + 1) for j in range(-lag, lag + 1) if (i, j) >= (0, 0)])
+    diff = half[:, None, :] - half[None, :, :]
+    summ = half[:, None, :] + half[None, :, :]
+    nonzero = np.any(half != 0, axis=1)
+    a = cx[..., diff[..., 0] % h, diff[..., 1] % w]
+    a = a + np.where(nonzero[None, :], cx[..., summ[..., 0] % h, summ[..., 1] % w], 0.0)
+    b = target[..., half[:, 0] + lag, half[:, 1] + lag]
+    coef = np.linalg.solve(a, b[..., None])[..., 0]
+    ch = np.zeros(x.shape)
+    ch[..., half[:, 0] % h, half[:, 1] % w] = coef
+    ch[..., -half[:, 0] % h, -half[:, 1] % w] = coef
+    gain = np.sqrt(np.abs(sfft.rfft2(ch.astype(np.float32)).real))
+    return sfft.irfft2(spec * gain, s=(h, w)).astype(np.float64)
+
+
+def _monotone_interval(num, den, power):
+    num, den = np.polynomial.Polynomial(num), np.polynomial.Polynomial(den)
+    roots = (num.deriv() * den - (power / 2.0) * num * den.deriv()).roots()
+    real = roots[np.abs(roots.imag) < 1e-6 * np.maximum(1.0, np.abs(roots.real))].real
+    below, above = real[real < 0], real[real > 0]
+    return (below.max() if below.size else -np.inf), (above.min() if above.size else np.inf)
+
+
+def _solve_lambda(coeffs_num, coeffs_den, target, power):
+    num, den = np.polynomial.Polynomial(coeffs_num), np.polynomial.Polynomial(coeffs_den)
+    poly = num**2 - target**2 * den**3 if power == 3 else num - target * den**2
+    roots = poly.roots()
+    real = roots[np.abs(roots.imag) < 1e-6 * np.maximum(1.0, np.abs(roots.real))].real
+    if power == 3:
+        real = real[np.sign(num(real)) == np.sign(target)] if target != 0 else real
+    low, high = _monotone_interval(coeffs_num, coeffs_den, power)
+    real = real[(real >= low) & (real <= high)]
+    if real.size:
+        return real[np.argmin(np.abs(real))]
+    ends = np.array([end for end in (low, high) if np.isfinite(end)])
+    if ends.size == 0:
+        return None
+    return ends[np.argmin(np.abs(num(ends) / den(ends) ** (power / 2.0) - target))]
+
+
+def _skewness(x, target):
+    mean = x.mean()
+    d = (x - mean).ravel()
+    d2 = d * d
+    m2 = d2.mean()
+    if moments.is_flat(m2, mean):
+        return x
+    m3 = np.dot(d2, d) / d.size
+    g = d2 - (m3 / m2) * d - m2
+    g2 = g * g
+    num = [m3, 3 * np.dot(d2, g) / d.size, 3 * np.dot(d, g2) / d.size, np.dot(g2, g) / d.size]
+    den = [m2, 2 * np.dot(d, g) / d.size, g2.mean()]
+    lam = _solve_lambda(num, den, target, 3)
+    y = d + lam * g
+    y *= np.sqrt(m2 / np.mean(y * y))
+    return (y + mean).reshape(x.shape)
+
+
+def _kurtosis(x, target):
+    mean = x.mean()
+    d = (x - mean).ravel()
+    n = d.size
+    d2 = d * d
+    d3 = d2 * d
+    m = [1.0, 0.0, d2.mean(), d3.mean(), np.dot(d2, d2) / n, np.dot(d3, d2) / n, np.dot(d3, d3) / n]
+    if moments.is_flat(m[2], mean):
+        return x
+    gram = np.array([[m[i + j] for j in range(3)] for i in range(3)])
+    coef = np.linalg.solve(gram, np.array([m[3], m[4], m[5]]))
+    g = d3 - coef[0] - coef[1] * d - coef[2] * d2
+    g2 = g * g
+    num = [m[4], 4 * np.dot(d3, g) / n, 6 * np.dot(d2, g2) / n, 4 * np.dot(d, g2 * g) / n, np.dot(g2, g2) / n]
+    den = [m[2], 2 * np.dot(d, g) / n, g2.mean()]
+    lam = _solve_lambda(num, den, target, 4)
+    y = d + lam * g
+    y -= y.mean()
+    y *= np.sqrt(m[2] / np.mean(y * y))
+    return (y + mean).reshape(x.shape)
+
+
+def _lowpass(images, autocorr, skew_kurt, pixel_var, lags):
+    window = projections.fit_window(autocorr, images.shape[-2:], lags)
+    centre = (window.shape[-1] - 1) // 2
+    target_var = window[:, centre, centre]
+    active = target_var / np.maximum(pixel_var, 1e-300) > 1e-4
+    out = np.array(images, dtype=np.float64)
+    if active.any():
+        out[active] = _autocorrelation(out[active], window[active])
+    for c in range(out.shape[0]):
+        if active[c]:
+            out[c] = _kurtosis(_skewness(out[c], skew_kurt[c, 0]), skew_kurt[c, 1])
+        else:
+            current = np.mean((out[c] - out[c].mean()) ** 2)
+            if current > 0:
+                out[c] *= np.sqrt(target_var[c] / current)
+    return out
+
+
+def _cross_correlation(x, target, y, target_xy):
+    n, k = x.shape
+    rows = np.concatenate([x.T, y.T], axis=0)
+    gram = rows @ rows.T / n
+    bxx, bxy, byy = gram[:k, :k], gram[:k, k:], gram[k:, k:]
+    ibyy = np.linalg.pinv(byy)
+    regression = ibyy @ bxy.T
+    current = bxx - bxy @ regression
+    desired = target - target_xy @ ibyy @ target_xy.T
+    m = projections._sqrtm(current, inverse=True) @ projections._sqrtm(desired)
+    return (m.T @ rows[:k] + (ibyy @ target_xy.T - regression @ m).T @ rows[k:]).T
+
+
+def _magnitudes(band, target, level, parent_magnitudes, lags):
+    c, k = band.shape[:2]
+    n = band.shape[-1] * band.shape[-2]
+    current = np.abs(band)
+    mags = current - current.mean(axis=(-2, -1), keepdims=True)
+    m = mags.reshape(c * k, n).T
+    if parent_magnitudes is None:
+        m = projections.adjust_correlation(m, target.magnitude_cross[level])
+    else:
+        m = _cross_correlation(
+            m, target.magnitude_cross[level], parent_magnitudes, target.magnitude_parent[level]
+        )
+    mags = m.T.reshape(mags.shape)
+    window = projections.fit_window(target.magnitude_autocorr[level], mags.shape[-2:], lags)
+    mags = _autocorrelation(mags, window)
+    magnitude = np.maximum(mags + target.magnitude_means[level][..., None, None], 0.0)
+    return band * (magnitude / np.where(current > 0, current, 1.0))
+
+
+def _parent_regression(reals, parents, target_xp):
+    n, k = reals.shape
+    rows = np.concatenate([reals.T, parents.T], axis=0).astype(np.float32)
+    gram = (rows @ rows.T).astype(np.float64) / n
+    own = np.diag(gram)[:k]
+    cross = gram[k:, :k]
+    ibyy = np.linalg.pinv(gram[k:, k:])
+    regression = ibyy @ cross
+    fit = ibyy @ target_xp.T
+    current = own - np.einsum("mk,mk->k", cross, regression)
+    desired = np.maximum(own - np.einsum("km,mk->k", target_xp, fit), 0.0)
+    scale = np.sqrt(desired / np.where(current > 0, current, 1.0))
+    mix = (fit - regression * scale).T.astype(np.float32)
+    return (rows[:k] * scale[:, None].astype(np.float32) + mix @ rows[k:]).T.astype(np.float64)
+
+
+def _parents(pyramid, spectra, level):
+    up = sfft.ifft2(_resize(spectra[level + 1], pyramid.sizes[level + 1], pyramid.sizes[level]))
+    re, im = up.real, up.imag
+    size = np.sqrt(re * re + im * im)
+    inv = np.divide(1.0, size, out=np.zeros_like(size), where=size > 0)
+    doubled = np.empty(up.shape, dtype=complex)
+    doubled.real = (im * im - re * re) * inv
+    doubled.imag = 2.0 * re * im * inv
+    c, k = up.shape[:2]
+    mags = np.abs(up)
+    mags = mags - mags.mean(axis=(-2, -1), keepdims=True)
+    reals = np.concatenate([doubled.real, doubled.imag], axis=1)
+    return mags.reshape(c * k, -1).T, reals.reshape(2 * c * k, -1).T
+
+
+def _pixels(x, target):
+    c = x.shape[0]
+    flat = x.reshape(c, -1)
+    centred = (flat - flat.mean(axis=1, keepdims=True)).T
+    flat = (
+        projections.adjust_correlation(centred, target.colour_covariance).T + target.pixel_moments[:, 0, None]
+    )
+    for ci in range(c):
+        if target.pixel_moments[ci, 1] > 0:
+            flat[ci] = _skewness(flat[ci], target.pixel_moments[ci, 2])
+            flat[ci] = _kurtosis(flat[ci], target.pixel_moments[ci, 3])
+    return np.clip(flat, target.pixel_range[:, :1], target.pixel_range[:, 1:]).reshape(x.shape)
+
+
+def _reference_iteration(x, target, pyramid, lags):
+    n_scales = pyramid.n_scales
+    pixel_var = target.pixel_moments[:, 1]
+    highpass, bands, residual, spectra = _forward(pyramid, x)
+    residual = residual - residual.mean(axis=(-2, -1), keepdims=True)
+    image = sfft.ifft2(_fft(pyramid, residual) * pyramid.mid[-1]).real
+    image = _lowpass(image, target.low_autocorr[n_scales], target.low_skew_kurt[:, n_scales], pixel_var, lags)
+    for s in range(n_scales - 1, -1, -1):
+        parent_mags = parent_reals = None
+        if s < n_scales - 1:
+            parent_mags, parent_reals = _parents(pyramid, spectra, s)
+        band = _magnitudes(bands[s], target, s, parent_mags, lags)
+        if s < n_scales - 1:
+            c, k = band.shape[:2]
+            n = band.shape[-1] * band.shape[-2]
+            real = _parent_regression(band.real.reshape(c * k, n).T, parent_reals, target.real_parent[s])
+            real = real.T.reshape(band.shape)
+        else:
+            real = band.real
+        real_spectra = _fft(pyramid, real)
+        spectra[s] = real_spectra * pyramid.half_planes[s]
+        image = _reconstruct_level(pyramid, image, s, real_spectra)
+        image = _lowpass(image, target.low_autocorr[s], target.low_skew_kurt[:, s], pixel_var, lags)
+    hp_var = np.mean(highpass**2, axis=(-2, -1))
+    wanted = target.highpass_variance
+    shrink = np.where(hp_var > wanted, np.sqrt(wanted / np.where(hp_var > 0, hp_var, 1.0)), 1.0)
+    spec = _fft(pyramid, image) + _fft(pyramid, highpass * shrink[:, None, None]) * pyramid.hi0
+    return _pixels(sfft.ifft2(spec).real, target)
+
+
+# --------------------------------------------------------------------------- tests
+
+
+@functools.cache
+def _fitted(colour: str):
+    rng = np.random.default_rng(3)
+    exemplar = texsyn.data.exemplar("gravel", size=64).astype(np.float64)
+    if colour == "rgb":
+        exemplar = np.clip(np.stack([exemplar, exemplar**1.5, 1 - exemplar], axis=-1), 0, 1)
+    exemplar = np.clip(exemplar + 0.02 * rng.standard_normal(exemplar.shape), 0, 1)
+    return texsyn.make_method("portilla_simoncelli", n_scales=3, colour=colour).fit(exemplar)
+
+
+@pytest.mark.parametrize("colour", ["grey", "rgb"])
+@pytest.mark.parametrize("shape", [(128, 128), (72, 90)])
+@pytest.mark.parametrize("cpus", [1, 3])
+def test_the_iteration_gives_the_plain_loops_bytes(colour, shape, cpus, monkeypatch):
+    # 128x128 bands go one by one (for_each_band), 72x90 all at once, with odd band sizes;
+    # the larger FFTs use ``cpus`` threads
+    monkeypatch.setattr(complex_steerable, "worker_count", lambda: cpus)
+    monkeypatch.setattr(complex_steerable, "_THREADED_FFT", 1 << 12)
+    model = _fitted(colour)
+    target = model.statistics_
+    pyramid = ComplexSteerablePyramid(shape, target.n_scales, target.n_orientations, single=True)
+    rng = np.random.default_rng(0)
+    moments = target.pixel_moments
+    x = moments[:, 0, None, None] + np.sqrt(moments[:, 1])[:, None, None] * rng.standard_normal(
+        (moments.shape[0],) + shape
+    )
+    fast, plain, workspace = x, x, {}
+    for _ in range(2):
+        fast = project_statistics(fast, target, pyramid, model.lags, workspace=workspace)
+        plain = _reference_iteration(plain, target, pyramid, model.lags)
+        assert fast.dtype == plain.dtype and fast.tobytes() == plain.tobytes()
+
+
+def test_the_step_solver_gives_numpy_polynomials_bits():
+    rng = np.random.default_rng(1)
+    cases = 0
+    for _ in range(600):
+        power = int(rng.choice([3, 4]))
+        num = list(rng.standard_normal(power + 1) * 10.0 ** rng.uniform(-3, 3, power + 1))
+        den = [abs(rng.standard_normal()) + 1e-3, rng.standard_normal(), abs(rng.standard_normal())]
+        if rng.random() < 0.1:
+            num[-1] = 0.0  # a zero leading coefficient is trimmed
+        if rng.random() < 0.1:
+            den[-1] = 0.0
+        target = np.float64(rng.standard_normal() * 3)
+        with np.errstate(all="ignore"):
+            fast = moments._solve_lambda(num, den, target, power)
+            plain = _solve_lambda(num, den, target, power)
+            interval = moments._monotone_interval(num, den, power)
+        if plain is None:
+            assert fast is None
+            continue
+        cases += 1
+        assert np.asarray(fast).tobytes() == np.asarray(plain).tobytes()
+        assert np.array(interval).tobytes() == np.array(_monotone_interval(num, den, power)).tobytes()
+    assert cases > 500
+
+
+@pytest.mark.parametrize("shape", [(64, 64), (45, 70), (131, 262)])
+def test_the_fft_shortcuts_give_the_full_transforms_bytes(shape):
+    # 131 and 262 use pocketfft's Bluestein plans, which scale inside the transform too
+    rng = np.random.default_rng(2)
+    pyramid = ComplexSteerablePyramid(shape, 2, 4, single=True)
+    (hc, wc), (h, w) = pyramid.sizes[1], pyramid.sizes[0]
+    spec = (rng.standard_normal((2, 4, hc, wc)) + 1j * rng.standard_normal((2, 4, hc, wc))).astype(
+        np.complex64
+    )
+    spec[:, 1] = 0.0  # a zero band: the signs of the zeros count too
+    plain = sfft.ifft2(_resize(spec, (hc, wc), (h, w)))
+    assert pyramid.upsampled_ifft(spec, 0).tobytes() == plain.tobytes()
+    assert (
+        pyramid.resize_spectrum(spec, (hc, wc), (h, w)).tobytes() == _resize(spec, (hc, wc), (h, w)).tobytes()
+    )
+    full = (rng.standard_normal((2, 4, h, w)) + 1j * rng.standard_normal((2, 4, h, w))).astype(np.complex64)
+    assert (
+        pyramid.resize_spectrum(full, (h, w), (hc, wc)).tobytes() == _resize(full, (h, w), (hc, wc)).tobytes()
+    )
+    x = rng.standard_normal((3, h, w))
+    window = rng.standard_normal((3, 7, 7))
+    window = window + window[:, ::-1, ::-1]
+    window[:, 3, 3] += 40.0
+    assert projections.impose_autocorrelation(x, window).tobytes() == _autocorrelation(x, window).tobytes()
