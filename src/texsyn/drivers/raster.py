@@ -322,9 +322,7 @@ def grow_pixels(
 
     n_filled, total = sh * sw, height * width
     threshold = float(max_error)
-    from scipy import ndimage  # 0.1 s of start-up that quilting and LG do not need
-
-    ring = np.ones((3, 3), dtype=bool)
+    near = np.zeros((height + 2, width + 2), dtype=bool)  # filled pixels, dilated by one
     # one thread computes the next chunk's lower bounds while this one is matched
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="texsyn-screen") as background:
         if isinstance(sampler, CoherentWindows):
@@ -332,14 +330,18 @@ def grow_pixels(
         else:
             fill = _ExactPass(sampler, canvas, background, max_batch)
         while n_filled < total:
-            # the pass: frontier pixels, shuffled, then the best-known first
+            # the pass: frontier pixels (unfilled, with a filled 8-neighbour), shuffled, then
+            # those with the most filled pixels in their window first
             inner = filled[r : r + height, r : r + width]
-            frontier = ndimage.binary_dilation(inner, structure=ring) & ~inner
-            rows, cols = np.nonzero(frontier)
-            known = ndimage.uniform_filter(filled.astype(np.float64), size=window, mode="constant")
+            near[:] = False
+            for dy in range(3):
+                for dx in range(3):
+                    near[dy : dy + height, dx : dx + width] |= inner
+            rows, cols = np.nonzero(near[1:-1, 1:-1] & ~inner)
             perm = rng.permutation(rows.size)
             rows, cols = rows[perm], cols[perm]
-            order = np.argsort(-np.rint(known[rows + r, cols + r] * window * window), kind="stable")
+            counts = np.count_nonzero(canvas.known_windows[rows, cols], axis=(1, 2))
+            order = np.argsort(-counts, kind="stable")
             rows, cols = rows[order], cols[order]
             uniforms = rng.random(rows.size)  # one draw per pixel, in list order
             filled_now = fill(rows, cols, uniforms, tolerance, threshold)
