@@ -147,7 +147,16 @@ def _approximate_search_error(exemplar, window, shape, k):
                 d = exact.bank.distances(win.reshape(1, -1), full)[0] / weights.sum()
                 one = slice(i, i + 1)
                 chosen[i] = super().grow_pass(
-                    rows[one], cols[one], uniforms[one], values, filled, source, tolerance, accept, stamp, first + i
+                    rows[one],
+                    cols[one],
+                    uniforms[one],
+                    values,
+                    filled,
+                    source,
+                    tolerance,
+                    accept,
+                    stamp,
+                    first + i,
                 )[0]
                 if chosen[i] >= 0:
                     records.append((d[chosen[i]], d.min()))
