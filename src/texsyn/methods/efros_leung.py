@@ -55,7 +55,7 @@ class EfrosLeung(TextureSynthesizer):
         the docs.
     k_coherence : int
         Similar windows per continuation in the approximate search (ranked on the
-        exemplar's 16 principal axes of Gaussian-weighted windows); unused by ``'exact'``.
+        exemplar's 8 principal axes of Gaussian-weighted windows); unused by ``'exact'``.
 
     References
     ----------

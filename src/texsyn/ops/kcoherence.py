@@ -19,7 +19,7 @@ __all__ = ["CoherentWindows"]
 
 #: windows on either side in the order of the first principal axis among which the approximate
 #: search's table looks for each window's most similar ones (:class:`CoherentWindows`)
-REACH = 128
+REACH = 32
 
 
 @jit()
@@ -184,7 +184,7 @@ class CoherentWindows:
         Principal axes used to rank similar windows.
     """
 
-    def __init__(self, exemplar: np.ndarray, window: int = 11, *, k: int = 4, dims: int = 16):
+    def __init__(self, exemplar: np.ndarray, window: int = 11, *, k: int = 4, dims: int = 8):
         self.exemplar = as_channels(np.asarray(exemplar, dtype=np.float64))
         self.window = int(window)
         radius = self.window // 2

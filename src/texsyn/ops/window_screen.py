@@ -121,8 +121,7 @@ def _known_lists(
 @jit()
 def _screened_pick(
     lower,
-    starts,
-    cols,
+    first_limit,
     offset,
     planes,
     grid_cols,
@@ -148,10 +147,9 @@ def _screened_pick(
     corner at ``divmod(j, grid_cols)`` in the exemplar, whose channel ``c`` is
     ``planes[c]``. Distances are in raw units (not per unit weight) until the rule.
 
-    The windows ``cols[starts[i]:starts[i + 1]] - i N`` (increasing; ``cols`` indexes the
-    flattened ``lower``) are those whose float32
-    bound ``lower[i, j]`` passed the first screen, with an exact distance ``upper[i]``
-    known to be at least the best one. Their bound gets the exact SSD over the new pixels;
+    The first screen keeps the windows whose float32 bound ``lower[i, j]`` is at most
+    ``first_limit[i]``, what an exact distance ``upper[i]``, known to be at least the best
+    one, allows. Their bound gets the exact SSD over the new pixels;
     the ``n_first`` of smallest bound get their exact distance (a smaller ``upper``); the
     windows whose bound leaves them a chance to be a candidate (the survivors) get their
     exact distance; and the rule ``d <= (1 + tolerance) min d + 1e-10`` (per unit weight)
@@ -173,17 +171,19 @@ def _screened_pick(
     error = np.zeros(m)
     unsure = np.zeros(m, np.bool_)
     survivors = np.zeros(m, np.int64)
-    longest = 0
+    passed = np.empty(n, np.int64)
+    bound = np.empty(n)
+    dist = np.empty(n)
+    index = np.empty(n, np.int64)
     for i in range(m):
-        longest = max(longest, starts[i + 1] - starts[i])
-    bound = np.empty(longest)
-    dist = np.empty(longest)
-    index = np.empty(longest, np.int64)
-    for i in range(m):
-        first, count = starts[i], starts[i + 1] - starts[i]
-        row = i * n
+        count = 0
+        cut = first_limit[i]
+        for j in range(n):  # the first screen: one pass over the row, rarely taken
+            if lower[i, j] <= cut:
+                passed[count] = j
+                count += 1
         for k in range(count):  # the bound, with the pixels known since ``lower`` was computed
-            j = cols[first + k] - row
+            j = passed[k]
             top = j // grid_cols
             left = j - top * grid_cols
             value = np.float64(lower[i, j])
@@ -205,7 +205,7 @@ def _screened_pick(
                     first_idx[p] = first_idx[p - 1]
                     p -= 1
                 first_val[p] = v
-                first_idx[p] = cols[first + k] - row
+                first_idx[p] = passed[k]
         known = n_known[i]
         best_raw = upper[i]
         for t in range(min(n_first, count)):
@@ -223,7 +223,7 @@ def _screened_pick(
         best = np.inf
         for k in range(count):
             if bound[k] <= limit:
-                j = cols[first + k] - row
+                j = passed[k]
                 top = j // grid_cols
                 left = j - top * grid_cols
                 index[n_in] = j
@@ -384,7 +384,6 @@ class ScreenBank:
             False where the float64 matrix product could choose otherwise (a survivor or
             the error within its rounding of the threshold or of ``accept``).
         """
-        k = windows.shape[0]
         norm = (known * self.gauss).sum(axis=(1, 2))  # as match computes it
         lower, offset = screen.lower[rows], screen.offset[rows]
         oy, ox, weights, values, n_new, n_known, spread, upper = _known_lists(
@@ -402,13 +401,10 @@ class ScreenBank:
         # first screen: every window whose float32 bound is below what the exact distance
         # of the window of smallest bound allows (rounded up to float32)
         reach = ((1.0 + tolerance) * (upper + spread) + 1e-10 * norm) * (1.0 + 1e-9) + spread
-        limit = np.nextafter((reach + offset).astype(np.float32), np.float32(np.inf))
-        flat = np.flatnonzero(lower <= limit[:, None])
-        starts = np.searchsorted(flat, np.arange(k + 1) * lower.shape[1])
+        first_limit = np.nextafter((reach + offset).astype(np.float32), np.float32(np.inf))
         choice, error, unsure, _ = _screened_pick(
             lower,
-            starts,
-            flat,
+            first_limit,
             offset,
             self.planes,
             self.grid_cols,
