@@ -23,17 +23,24 @@ Two loop shapes, hence two functions:
 
 See ``docs/methods/efros_leung.md``, ``docs/methods/quilting.md`` and
 ``docs/methods/local_gaussian.md``.
+
+Why this module is long: both loops of the family are here, each written once for all the
+methods that walk the output that way; the pixel growth has two kinds of pass (the exact
+search in batches, with its chunks of lower bounds computed in the background, and the
+approximate one), which share everything else.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from ..ops.canvas import padded_canvas
+from ..ops.kcoherence import CoherentWindows
 from ..ops.nonparametric import NonParametricSampler, schedule_batches
 from ..ops.progress import Reporter
 
@@ -252,8 +259,63 @@ def fill_block_rows(
 
 
 # ---------------------------------------------------------------------------- pixel growth
+class _Chunks:
+    """The lower bounds of one pass of :func:`grow_pixels`, chunk by chunk of whole batches.
+
+    A chunk is a run of batches with about ``rows`` pixels in all. The bounds of chunk
+    ``c + 1`` are computed by ``background`` (one thread, itself using the matrix-product
+    pool) while chunk ``c`` is matched, from what is known when chunk ``c`` starts: the
+    pixels filled in between enter the exact distances, and those of large weight the
+    bound too (:meth:`~texsyn.ops.nonparametric.NonParametricSampler.match_screened`).
+    The bounds depend only on what is known when they are computed, never on timing.
+
+    Parameters
+    ----------
+    sampler : NonParametricSampler
+    background : ThreadPoolExecutor
+    bounds : ndarray of int
+        Batch ``b`` is pixels ``bounds[b]:bounds[b + 1]`` of ``rows, cols``.
+    rows, cols : ndarray of int
+        The pass's pixels in batch order.
+    size : int
+        Pixels per chunk, about.
+    """
+
+    def __init__(self, sampler, background, bounds, rows, cols, size):
+        self.sampler, self.background, self.bounds = sampler, background, bounds
+        self.rows, self.cols = rows, cols
+        n_batches = bounds.size - 1
+        firsts = [0]
+        while firsts[-1] < n_batches:
+            reach = int(np.searchsorted(bounds, bounds[firsts[-1]] + size, "right")) - 1
+            firsts.append(min(n_batches, max(firsts[-1] + 1, reach)))
+        self.firsts = firsts
+        self.chunk = -1
+        self.current: Any = None
+        self.upcoming: Any = None
+
+    def _submit(self, chunk: int, value_windows: np.ndarray, known_windows: np.ndarray) -> Any:
+        if chunk >= len(self.firsts) - 1:
+            return None
+        span = slice(self.bounds[self.firsts[chunk]], self.bounds[self.firsts[chunk + 1]])
+        rows, cols = self.rows[span], self.cols[span]
+        windows = np.moveaxis(value_windows[rows, cols], 1, 3)
+        return self.background.submit(self.sampler.screen, windows, known_windows[rows, cols])
+
+    def screen(self, batch: int, value_windows: np.ndarray, known_windows: np.ndarray) -> tuple[Any, slice]:
+        """The bounds of ``batch``'s chunk and the rows of ``batch`` in them."""
+        if self.chunk + 1 < len(self.firsts) - 1 and batch >= self.firsts[self.chunk + 1]:
+            self.chunk += 1
+            if self.upcoming is None:
+                self.upcoming = self._submit(self.chunk, value_windows, known_windows)
+            self.current = self.upcoming.result()
+            self.upcoming = self._submit(self.chunk + 1, value_windows, known_windows)
+        start = self.bounds[self.firsts[self.chunk]]
+        return self.current, slice(self.bounds[batch] - start, self.bounds[batch + 1] - start)
+
+
 def grow_pixels(
-    sampler: NonParametricSampler,
+    sampler: NonParametricSampler | CoherentWindows,
     shape: tuple[int, int],
     *,
     tolerance: float = 0.1,
@@ -278,12 +340,14 @@ def grow_pixels(
 
     Vectorised without changing the result: a pixel's template depends only on pixels
     within ``r = w // 2`` of it, so each pass is split into batches of pixels that do not
-    interact (:func:`~texsyn.ops.nonparametric.schedule_batches`) and every batch is
-    searched with one matrix product. This is exactly the sequential order of the pass.
+    interact (:func:`~texsyn.ops.nonparametric.schedule_batches`), searched together: this is
+    exactly the sequential order of the pass (``docs/methods/efros_leung.md``, "Speed"). A
+    :class:`~texsyn.ops.kcoherence.CoherentWindows` sampler (the approximate search) fills
+    the pixels one by one in a compiled loop instead.
 
     Parameters
     ----------
-    sampler : NonParametricSampler
+    sampler : NonParametricSampler or CoherentWindows
         The exemplar's windows and the candidate rule (built once, in ``fit``).
     shape : (int, int)
         Output size.
@@ -313,12 +377,13 @@ def grow_pixels(
     height, width = shape
     window = sampler.window
     r = window // 2
-    batch_cap = int(max(8, min(max_batch, (1 << 23) // max(sampler.n_windows, 1))))
-    dy, dx = np.meshgrid(np.arange(window), np.arange(window), indexing="ij")
-
-    values = np.zeros((height + 2 * r, width + 2 * r, channels))
-    filled = np.zeros((height + 2 * r, width + 2 * r), dtype=bool)
-    source = np.full((height, width, 2), -1, dtype=np.int64)
+    canvas = _Canvas(
+        np.zeros((height + 2 * r, width + 2 * r, channels)),
+        np.zeros((height + 2 * r, width + 2 * r), dtype=bool),
+        np.full((height, width, 2), -1, dtype=np.int64),
+        r,
+    )
+    values, filled, source = canvas.values, canvas.filled, canvas.source
 
     if seed_block is None:
         sh = sw = int(min(seed_size, height, width, ex_h, ex_w))
@@ -338,41 +403,128 @@ def grow_pixels(
 
     n_filled, total = sh * sw, height * width
     threshold = float(max_error)
-    from scipy import ndimage  # 0.1 s of start-up that quilting and LG do not need
+    near = np.zeros((height + 2, width + 2), dtype=bool)  # filled pixels, dilated by one
+    # one thread computes the next chunk's lower bounds while this one is matched
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="texsyn-screen") as background:
+        if isinstance(sampler, CoherentWindows):
+            fill: _ApproximatePass | _ExactPass = _ApproximatePass(sampler, canvas)
+        else:
+            fill = _ExactPass(sampler, canvas, background, max_batch)
+        while n_filled < total:
+            # the pass: frontier pixels (unfilled, with a filled 8-neighbour), shuffled, then
+            # those with the most filled pixels in their window first
+            inner = filled[r : r + height, r : r + width]
+            near[:] = False
+            for dy in range(3):
+                for dx in range(3):
+                    near[dy : dy + height, dx : dx + width] |= inner
+            rows, cols = np.nonzero(near[1:-1, 1:-1] & ~inner)
+            perm = rng.permutation(rows.size)
+            rows, cols = rows[perm], cols[perm]
+            counts = np.count_nonzero(canvas.known_windows[rows, cols], axis=(1, 2))
+            order = np.argsort(-counts, kind="stable")
+            rows, cols = rows[order], cols[order]
+            uniforms = rng.random(rows.size)  # one draw per pixel, in list order
+            filled_now = fill(rows, cols, uniforms, tolerance, threshold)
+            n_filled += filled_now
+            if filled_now == 0:
+                threshold *= 1.1
+            if reporter is not None:
+                reporter(n_filled, total)
+    return values[r : r + height, r : r + width], source
 
-    ring = np.ones((3, 3), dtype=bool)
-    while n_filled < total:
-        # the pass: frontier pixels, shuffled, then the best-known first
-        inner = filled[r : r + height, r : r + width]
-        frontier = ndimage.binary_dilation(inner, structure=ring) & ~inner
-        rows, cols = np.nonzero(frontier)
-        known = ndimage.uniform_filter(filled.astype(np.float64), size=window, mode="constant")
-        perm = rng.permutation(rows.size)
-        rows, cols = rows[perm], cols[perm]
-        order = np.argsort(-np.rint(known[rows + r, cols + r] * window * window), kind="stable")
-        rows, cols = rows[order], cols[order]
-        batch_of, n_batches = schedule_batches(rows, cols, r, height, width, batch_cap)
-        uniforms = rng.random(rows.size)  # one draw per pixel, in list order
+
+@dataclass
+class _Canvas:
+    """What :func:`grow_pixels` grows: the padded values and mask, and the source map."""
+
+    values: np.ndarray
+    filled: np.ndarray
+    source: np.ndarray
+    r: int
+
+    def __post_init__(self) -> None:
+        # the window around every output pixel, as views: indexing them copies whole windows
+        window = 2 * self.r + 1
+        self.value_windows = np.lib.stride_tricks.sliding_window_view(
+            self.values, (window, window), axis=(0, 1)
+        )
+        self.known_windows = np.lib.stride_tricks.sliding_window_view(self.filled, (window, window))
+
+
+class _ExactPass:
+    """One pass of the exact search, in batches of pixels that do not interact.
+
+    A pixel's template depends only on pixels within ``r = w // 2`` of it, so the pass is
+    split into batches (:func:`~texsyn.ops.nonparametric.schedule_batches`), searched in
+    order: exactly the sequential order of the pass. With a sampler that
+    :attr:`~texsyn.ops.nonparametric.NonParametricSampler.screens`, a batch is matched from
+    the float32 lower bounds of its chunk (:class:`_Chunks`), otherwise by
+    :meth:`~texsyn.ops.nonparametric.NonParametricSampler.match`.
+    """
+
+    def __init__(self, sampler: NonParametricSampler, canvas: _Canvas, background, max_batch: int):
+        self.sampler, self.canvas, self.background = sampler, canvas, background
+        self.batch_cap = int(max(8, min(max_batch, (1 << 23) // max(sampler.n_windows, 1))))
+        self.screen_rows = max(self.batch_cap, (1 << 23) // max(sampler.n_windows, 1))
+        self.screened = sampler.screens
+
+    def __call__(self, rows, cols, uniforms, tolerance: float, threshold: float) -> int:
+        sampler, canvas, r = self.sampler, self.canvas, self.canvas.r
+        height, width = canvas.source.shape[:2]
+        batch_of, n_batches = schedule_batches(rows, cols, r, height, width, self.batch_cap)
         by_batch = np.argsort(batch_of, kind="stable")
         bounds = np.searchsorted(batch_of[by_batch], np.arange(n_batches + 1))
+        if self.screened:
+            chunks = _Chunks(
+                sampler, self.background, bounds, rows[by_batch], cols[by_batch], self.screen_rows
+            )
         filled_now = 0
         for b in range(n_batches):
-            members = by_batch[bounds[b] : bounds[b + 1]]
+            start, end = int(bounds[b]), int(bounds[b + 1])
+            members = by_batch[start:end]
             pr, pc = rows[members], cols[members]
-            win_r = pr[:, None, None] + dy
-            win_c = pc[:, None, None] + dx
-            src, err = sampler.match(values[win_r, win_c], filled[win_r, win_c], tolerance, uniforms[members])
-            ok = err <= threshold
+            windows, known = np.moveaxis(canvas.value_windows[pr, pc], 1, 3), canvas.known_windows[pr, pc]
+            if self.screened:
+                screen, rows_now = chunks.screen(b, canvas.value_windows, canvas.known_windows)
+                src, _, ok = sampler.match_screened(
+                    windows, known, tolerance, uniforms[members], screen, rows_now, threshold
+                )
+            else:
+                src, err = sampler.match(windows, known, tolerance, uniforms[members])
+                ok = err <= threshold
             if not np.any(ok):
                 continue
             pr, pc, src = pr[ok], pc[ok], src[ok]
-            values[pr + r, pc + r] = ex[src[:, 0], src[:, 1]]
-            filled[pr + r, pc + r] = True
-            source[pr, pc] = src
+            canvas.values[pr + r, pc + r] = sampler.exemplar[src[:, 0], src[:, 1]]
+            canvas.filled[pr + r, pc + r] = True
+            canvas.source[pr, pc] = src
             filled_now += int(ok.sum())
-        n_filled += filled_now
-        if filled_now == 0:
-            threshold *= 1.1
-        if reporter is not None:
-            reporter(n_filled, total)
-    return values[r : r + height, r : r + width], source
+        return filled_now
+
+
+class _ApproximatePass:
+    """One pass of the approximate search: pixel by pixel in list order, in one compiled
+    loop (:meth:`~texsyn.ops.kcoherence.CoherentWindows.grow_pass`)."""
+
+    def __init__(self, sampler: CoherentWindows, canvas: _Canvas):
+        self.sampler, self.canvas = sampler, canvas
+        self.stamp = np.full(sampler.n_windows, -1, dtype=np.int64)
+        self.n_stamped = 0
+
+    def __call__(self, rows, cols, uniforms, tolerance: float, threshold: float) -> int:
+        canvas = self.canvas
+        chosen = self.sampler.grow_pass(
+            rows,
+            cols,
+            uniforms,
+            canvas.values,
+            canvas.filled,
+            canvas.source,
+            tolerance,
+            threshold,
+            self.stamp,
+            self.n_stamped,
+        )
+        self.n_stamped += rows.size
+        return int(np.count_nonzero(chosen >= 0))

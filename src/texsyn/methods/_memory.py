@@ -93,14 +93,20 @@ def nonparametric_bytes(
     """``(kept, transient)`` bytes of :class:`~texsyn.ops.nonparametric.NonParametricSampler`.
 
     The sampler keeps the stacked bank ``[patches^2, -2 patches]`` of all ``K`` windows of the
-    ``h x w x c`` exemplar (``16 K w^2 c`` bytes). With ``output_shape=None`` the transient is
-    that of its construction (patch extraction and the squares); otherwise that of growing a
-    texture of that size: the padded canvas, its masks and one batch of searches, whose size
-    is bounded by the length of the growing front.
+    ``h x w x c`` exemplar (``16 K w^2 c`` bytes) and the float32 bank of the exact search's
+    lower bounds (``4 K n``, ``n = |disc| (1 + min(c, 2))``). With ``output_shape=None`` the
+    transient is that of its construction (patch extraction and the squares); otherwise that
+    of growing a texture of that size: the padded canvas, its masks, one batch of searches,
+    whose size is bounded by the length of the growing front, and two chunks of float32 lower
+    bounds (``2 x 4 K`` bytes a row, ``max(256, 2^23 / K)`` rows or a front, whichever is
+    shorter; ``docs/methods/efros_leung.md``).
     """
     k = float(max(1, (h - window + 1) * (w - window + 1)))
     dim = float(window * window * c)
-    kept = 16.0 * k * dim + 16.0 * k
+    grid = np.arange(window) - window // 2
+    disc = float(np.count_nonzero(grid[:, None] ** 2 + grid[None, :] ** 2 <= 16))
+    screen = disc * (1 + min(c, 2))
+    kept = 16.0 * k * dim + 16.0 * k + 4.0 * k * screen + 16.0 * float(h * w * c)
     if output_shape is None:
         return kept, 24.0 * k * dim
     oh, ow = output_shape[:2]
@@ -110,6 +116,8 @@ def nonparametric_bytes(
     batch = float(min(cap, max(8, (oh + ow) // (r + 1))))
     grow = padded * (8.0 * c + 33.0) + 16.0 * float(oh) * float(ow) + 64.0 * (oh + ow + 8 * r)
     grow += batch * (48.0 * dim + 16.0 * k + 24.0 * window * window)
+    chunk = float(min(max(cap, (1 << 23) // int(k)), 2 * (oh + ow)))  # at most a growing front
+    grow += 2.0 * chunk * (4.0 * k + 16.0 * screen + 8.0 * dim) + 24.0 * k
     return kept, grow
 
 

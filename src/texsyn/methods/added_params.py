@@ -58,6 +58,10 @@ ADDED_PARAMS: dict[str, dict[str, AddedParam]] = {
         "histogram": _NO_HISTOGRAM,
         "highpass": AddedParam("0.2.0", "none", "only the pixel histogram was matched"),
     },
+    "efros_leung": {
+        "search": AddedParam("0.2.0", DEFAULT, "the search was exhaustive ('exact')"),
+        "k_coherence": AddedParam("0.2.0", DEFAULT, "used only with search='approximate'"),
+    },
     "cwt": {
         "coherence": AddedParam(
             "0.2.0", 0.0, "each coarse block was drawn among all candidates (the paper's rule)"

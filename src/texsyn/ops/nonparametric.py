@@ -25,6 +25,7 @@ from .jit import jit
 from .patches import as_channels, extract_patches
 from .progress import Reporter
 from .search import WeightedPatchBank
+from .window_screen import ScreenBank, WindowScreen
 
 __all__ = ["NonParametricSampler", "grow_texture", "schedule_batches"]
 
@@ -127,6 +128,7 @@ class NonParametricSampler:
         grid = np.arange(self.window) - radius
         sigma = self.window / 6.4
         self.gauss = np.exp(-(grid[:, None] ** 2 + grid[None, :] ** 2) / (2.0 * sigma**2))
+        self._screen = ScreenBank(self.exemplar, patches, self.gauss)
 
     @property
     def n_windows(self) -> int:
@@ -164,6 +166,66 @@ class NonParametricSampler:
         d /= norm[:, None]
         choice, error = _pick_candidates(d, float(tolerance), uniforms)
         return self.centres[choice], error
+
+    @property
+    def screens(self) -> bool:
+        """Whether :meth:`screen` and :meth:`match_screened` stand for :meth:`match`.
+
+        False for a subclass with its own :meth:`match` (its rule is not the screened one).
+        """
+        return type(self).match is NonParametricSampler.match
+
+    def screen(self, windows: np.ndarray, known: np.ndarray) -> WindowScreen:
+        """Float32 lower bounds of the distances of ``k`` windows, for :meth:`match_screened`
+        (:meth:`texsyn.ops.window_screen.ScreenBank.screen`).
+
+        Parameters
+        ----------
+        windows : ndarray, shape (k, w, w, C)
+        known : ndarray of bool, shape (k, w, w)
+            What is known of them now; it must stay known until they are matched.
+        """
+        return self._screen.screen(windows, known)
+
+    def match_screened(
+        self,
+        windows: np.ndarray,
+        known: np.ndarray,
+        tolerance: float,
+        uniforms: np.ndarray,
+        screen: WindowScreen,
+        rows: slice,
+        accept: float,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`match` and its acceptance ``error <= accept``, from the lower bounds of ``screen``.
+
+        The same choice as :meth:`match` (``docs/methods/efros_leung.md``, "Speed"): every
+        window that could be a candidate of :meth:`match` survives the float32 screen and
+        gets its exact float64 distance; where the rounding of :meth:`match`'s matrix
+        product could put a survivor on the other side of the threshold (a distance within
+        about ``1e-12`` of it, relatively), the whole batch is searched by :meth:`match`.
+
+        Parameters
+        ----------
+        windows, known, tolerance, uniforms
+            As for :meth:`match`; ``known`` must contain what ``screen`` was built with.
+        screen : WindowScreen
+        rows : slice
+            The rows of ``screen`` that belong to these windows.
+        accept : float
+            Largest accepted error.
+
+        Returns
+        -------
+        source : ndarray of int64, shape (k, 2)
+        error : ndarray, shape (k,)
+        accepted : ndarray of bool, shape (k,)
+        """
+        choice, error, sure = self._screen.choose(windows, known, tolerance, uniforms, screen, rows, accept)
+        if not sure:
+            source, error = self.match(windows, known, tolerance, uniforms)
+            return source, error, error <= accept
+        return self.centres[choice], error, error <= accept
 
     def grow(
         self,
