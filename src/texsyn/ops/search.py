@@ -474,6 +474,12 @@ def _squared_distance(q, b):
 
 
 @jit(nogil=True)
+def _band(coefficients, x):
+    """A band around a squared distance ``x``: ``c[0] x + c[1] sqrt(x) + c[2]`` (increasing in ``x``)."""
+    return coefficients[0] * x + coefficients[1] * np.sqrt(x) + coefficients[2]
+
+
+@jit(nogil=True)
 def _fold_max(maxima, values, n):
     """``maxima[k] = max(maxima[k], values[k])`` for ``k < n`` (a loop the compiler vectorises)."""
     for k in range(n):
@@ -539,7 +545,8 @@ def _bounded_chunk(
     norm beyond the next coordinates and its error bound, then the next coordinates. The
     state carried from chunk to chunk, per query: the best row and
     its distance, the bound, the rows kept (every row whose distance may lie within
-    ``band[i]`` of the smallest is among them) and whether more than ``keep_j.shape[1]``
+    ``band(i, x) = band[i, 0] x + band[i, 1] sqrt(x) + band[i, 2]`` of the smallest ``x`` is
+    among them) and whether more than ``keep_j.shape[1]``
     had to be kept.
     """
     m, width = gram.shape
@@ -580,7 +587,8 @@ def _bounded_chunk(
                 bx = x
                 bj = j0
         # a row can pass only if sqrt(L - l_err) - q_err - b_err_max <= sigma sqrt(upper + band)
-        reach = sigma * np.sqrt(upper[i] + band[i]) + q_err[i] + b_err_max
+        bound = upper[i] + _band(band[i], upper[i])
+        reach = sigma * np.sqrt(bound) + q_err[i] + b_err_max
         limit = 0.5 * (reach * reach + l_err[i] - q_sq[i])
         floor32 = -np.float32(limit + 1e-6 * abs(limit) + 1e-30)
         full = overflow[i]
@@ -607,7 +615,7 @@ def _bounded_chunk(
                 res = abs(q_res[i] - rec[1]) - q_res_err[i] - rec[2]
                 if res > 0.0:
                     lower += res * res
-                if lower > upper[i] + band[i]:
+                if lower > bound:
                     continue
                 if n_ext > 0:  # the next coordinates and the residual beyond them
                     ext = 0.0
@@ -620,7 +628,7 @@ def _bounded_chunk(
                     res = abs(q_res2[i] - rec[3]) - q_res2_err[i] - rec[4]
                     if res > 0.0:
                         lower += res * res
-                    if lower > upper[i] + band[i]:
+                    if lower > bound:
                         continue
                 x = _squared_distance(q, bank[j])
                 if x < bx or (x == bx and j < bj):
@@ -628,11 +636,12 @@ def _bounded_chunk(
                     bj = j
                 if x * (1.0 + gamma_x) < upper[i]:
                     upper[i] = x * (1.0 + gamma_x)
-                    reach = sigma * np.sqrt(upper[i] + band[i]) + q_err[i] + b_err_max
+                    bound = upper[i] + _band(band[i], upper[i])
+                    reach = sigma * np.sqrt(bound) + q_err[i] + b_err_max
                     limit = 0.5 * (reach * reach + l_err[i] - q_sq[i])
                     floor32 = -np.float32(limit + 1e-6 * abs(limit) + 1e-30)
                 if n_kept == capacity:  # drop the rows that can no longer be within the band
-                    cut = bx * (1.0 + 3.0 * gamma_x) + (1.0 + gamma_x) * band[i]
+                    cut = bx * (1.0 + 3.0 * gamma_x) + (1.0 + gamma_x) * _band(band[i], bx * (1.0 + gamma_x))
                     n = 0
                     for t in range(n_kept):
                         if keep_x[i, t] <= cut:
@@ -672,7 +681,7 @@ def _bounded_merge(best_j, best_x, keep_x, kept, overflow, gamma_x, bands, index
             if full:
                 counts[i, t] = capacity + 1
                 continue
-            cut = bx * (1.0 + 3.0 * gamma_x) + (1.0 + gamma_x) * bands[i, t]
+            cut = bx * (1.0 + 3.0 * gamma_x) + (1.0 + gamma_x) * _band(bands[i, t], bx * (1.0 + gamma_x))
             n = 0
             for p in range(n_parts):
                 for r in range(kept[p, i]):
@@ -763,20 +772,25 @@ class BoundedNearestIndex:
         """Projection error bound, residual norms and their error bounds of centred rows.
 
         ``full`` is ``centred @ basis``. ``err`` bounds the distance between the float32
-        coordinates (all of them) and the exact ones ``V^T x`` of the exact centred vector;
-        ``res`` and ``res2`` are the computed norms of the parts of ``x`` outside the first
-        ``dims`` and outside all coordinates, ``res_err`` and ``res2_err`` bound their errors
-        (including ``V``'s departure from orthonormality).
+        coordinates (all of them) and the exact ones ``V^T x`` of the exact centred vector.
+        ``res`` and ``res2`` are the norms of the parts of ``x`` outside the first ``dims``
+        and outside all coordinates, from ``||x||^2`` less the squared coordinates; the
+        error of that difference is at most ``eps = 1.1 (3 sqrt(p) gamma_{D+p} + 4 omega +
+        4 u) ||x||^2`` (``omega``: ``V``'s departure from orthonormality), so the norms are
+        within ``res_err = sqrt(eps)`` of the exact ones.
         """
         d, p = self.basis.shape
-        size = np.sqrt(np.einsum("kd,kd->k", centred, centred))
+        size_sq = np.einsum("kd,kd->k", centred, centred)
+        size = np.sqrt(size_sq)
         err = 1.2 * (_U32 + np.sqrt(p) * _gamma(d + 3, _U64)) * self._sigma * size
-        res_err = (4.0 * (d + p + 8) * _U64 * np.sqrt(p) * self._sigma + 4.0 * self._ortho) * size + 1e-300
-        out = [err]
-        for cols in (self.dims, p):
-            residual = centred - full[:, :cols] @ self.basis[:, :cols].T
-            out += [np.sqrt(np.einsum("kd,kd->k", residual, residual)), res_err]
-        return tuple(out)
+        squares = full * full
+        head = squares[:, : self.dims].sum(axis=1)
+        tail = squares[:, self.dims :].sum(axis=1)
+        eps = 1.1 * (3.0 * np.sqrt(p) * _gamma(d + p, _U64) + 4.0 * self._ortho + 4.0 * _U64) * size_sq
+        res_err = np.sqrt(eps) + 1e-300
+        res = np.sqrt(np.maximum(size_sq - head, 0.0))
+        res2 = np.sqrt(np.maximum(size_sq - head - tail, 0.0))
+        return err, res, res_err, res2, res_err
 
     def query(
         self, queries: np.ndarray, bands: np.ndarray, seeds: np.ndarray | None = None
@@ -792,8 +806,10 @@ class BoundedNearestIndex:
         Parameters
         ----------
         queries : ndarray, shape (Q, D)
-        bands : ndarray, shape (Q, B)
-            Non-negative margins on the squared distance, per query.
+        bands : ndarray, shape (Q, B) or (Q, B, 3)
+            Non-negative margins on the squared distance, per query: constants, or the
+            coefficients ``(a, b, c)`` of the band ``a x + b sqrt(x) + c`` around the smallest
+            squared distance ``x`` (non-negative: the band grows with ``x``).
         seeds : ndarray of int, shape (Q, S), optional
             Rows likely to be near each query (``-1``: none), for a tight first bound.
 
@@ -805,12 +821,17 @@ class BoundedNearestIndex:
             Its computed squared distance (relative error at most ``gamma_{D+3}``).
         counts : ndarray of int64, shape (Q, B)
             For each band, at least the number of rows ``j`` with
-            ``||q - b_j||^2 <= min_k ||q - b_k||^2 + band`` (every such row is among those
-            counted); ``capacity + 1`` when the query had too many candidates.
+            ``||q - b_j||^2 <= x + band(x)``, ``x = min_k ||q - b_k||^2`` (every such row is
+            among those counted); ``capacity + 1`` when the query had too many candidates.
         """
         queries = np.ascontiguousarray(queries, dtype=np.float64)
         n, d = queries.shape
-        bands = np.ascontiguousarray(bands, dtype=np.float64).reshape(n, -1)
+        bands = np.asarray(bands, dtype=np.float64)
+        if bands.ndim < 3:  # constant bands
+            constant = bands.reshape(n, -1)
+            bands = np.zeros(constant.shape + (3,))
+            bands[..., 2] = constant
+        bands = np.ascontiguousarray(bands)
         if seeds is None:
             seeds = np.full((n, 0), -1, dtype=np.int64)
         seeds = np.ascontiguousarray(seeds, dtype=np.int64).reshape(n, -1)
@@ -851,7 +872,7 @@ class BoundedNearestIndex:
         l_err = 2.5 * _gamma(self.dims + 4, _U32) * (np.sqrt(q_sq) + self._proj_max) ** 2 + 1e-300
         q_err, q_res, q_res_err, q_res2, q_res2_err = self._side_terms(centred, full)
         q_ext = np.ascontiguousarray(full[:, self.dims :].astype(np.float32).astype(np.float64))
-        band = np.ascontiguousarray(bands.max(axis=1))
+        band = np.ascontiguousarray(bands.max(axis=1))  # a band above every band given
         best_j = np.empty((n_parts, m), dtype=np.int64)
         best_x = np.empty((n_parts, m))
         upper = np.full((n_parts, m), np.inf)
