@@ -43,7 +43,7 @@ from ..drivers.coarse_to_fine import coarse_to_fine
 from ..errors import InputError
 from ..ops.patches import as_channels
 from ..ops.progress import Reporter
-from ..ops.search import nearest_rows
+from ..ops.search import BoundedNearestIndex, nearest_rows, nearest_rows_bounded
 from ..ops.tsvq import TSVQ
 from ..transforms.pyramids import gaussian_pyramid
 from ..transforms.steerable import pyramid_sizes
@@ -51,6 +51,10 @@ from ._base import TextureSynthesizer
 from ._memory import output_bytes, pixel_count, shape_dims
 
 __all__ = ["WeiLevoy", "causal_offsets", "TSVQ"]  # TSVQ: from texsyn.ops.tsvq, kept here for 0.1 users
+
+#: levels whose bank has at least this many rows are searched through a
+#: :class:`~texsyn.ops.search.BoundedNearestIndex` (the same rows as the plain product, proven)
+BOUNDED_SEARCH_ROWS = 2048
 
 
 def causal_offsets(window: int) -> np.ndarray:
@@ -186,7 +190,7 @@ class WeiLevoy(TextureSynthesizer):
         self.causal_ = causal_offsets(self.window)
         self.parent_ = square_offsets(self.parent_window)
         rng = np.random.default_rng(self.fit_rng)
-        self.banks_, self.norms_, self.trees_ = [], [], []
+        self.banks_, self.norms_, self.trees_, self.indexes_ = [], [], [], []
         for level, image in enumerate(self.pyramid_):
             rows, cols = np.divmod(np.arange(image.shape[0] * image.shape[1]), image.shape[1])
             parts = [_gather(image, rows, cols, self.causal_)]
@@ -196,6 +200,8 @@ class WeiLevoy(TextureSynthesizer):
             self.banks_.append(bank)
             self.norms_.append(np.sum(bank * bank, axis=1))
             self.trees_.append(TSVQ(bank, self.leaf_size, rng) if self.search == "tsvq" else None)
+            bounded = self.search == "exact" and len(bank) >= BOUNDED_SEARCH_ROWS
+            self.indexes_.append(BoundedNearestIndex(bank) if bounded else None)
 
     def _sample(self, shape, rng, callback):
         """Step 2: the output pyramid, coarse to fine; the finest level and its sources."""
@@ -254,9 +260,12 @@ class WeiLevoy(TextureSynthesizer):
         ex = self.pyramid_[level]
         h, w = size
         flat_ex = ex.reshape(-1, ex.shape[2])
-        out = flat_ex[rng.integers(len(flat_ex), size=h * w)].reshape(h, w, ex.shape[2]).copy()
-        src = np.zeros((h, w), dtype=np.int64)
+        start = rng.integers(len(flat_ex), size=h * w)
+        out = flat_ex[start].reshape(h, w, ex.shape[2]).copy()
+        src = start.reshape(h, w)  # every pixel's source is overwritten when it is synthesised
+        eh, ew = ex.shape[:2]
         bank, norms, tree = self.banks_[level], self.norms_[level], self.trees_[level]
+        index = self.indexes_[level]
         slope = self.window // 2 + 1
         ys_all = np.arange(h)
         for t in range(w + slope * (h - 1)):
@@ -268,7 +277,14 @@ class WeiLevoy(TextureSynthesizer):
             q = _gather(out, ys, xs, self.causal_)
             if parent is not None:
                 q = np.concatenate([q, _gather(parent, ys // 2, xs // 2, self.parent_)], axis=1)
-            best = tree.nearest(q) if tree is not None else nearest_rows(q, bank, norms)
+            if tree is not None:
+                best = tree.nearest(q)
+            elif index is not None:  # seeds: the continuations of the left and upper sources
+                left, up = src[ys, xs - 1], src[ys - 1, xs]
+                seeds = np.stack([left - left % ew + (left + 1) % ew, (up + ew) % (eh * ew)], axis=1)
+                best = nearest_rows_bounded(q, bank, norms, index, seeds)
+            else:
+                best = nearest_rows(q, bank, norms)
             out[ys, xs] = flat_ex[best]
             src[ys, xs] = best
             done += len(ys)

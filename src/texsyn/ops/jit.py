@@ -36,6 +36,9 @@ class LazyKernel:
         The kernel in plain Python (numba's nopython subset).
     parallel : bool
         Compile with ``parallel=True`` (loops over :data:`prange` run on numba's threads).
+    nogil : bool
+        Compile with ``nogil=True``: the kernel releases the GIL, so that texsyn's thread
+        pool (:func:`texsyn.ops.linalg.parallel_map`) can run several calls at once.
 
     Attributes
     ----------
@@ -43,9 +46,10 @@ class LazyKernel:
         The Python function, callable without numba (tests, mutation runs).
     """
 
-    def __init__(self, py_func: Callable[..., Any], parallel: bool = False) -> None:
+    def __init__(self, py_func: Callable[..., Any], parallel: bool = False, nogil: bool = False) -> None:
         self.py_func = py_func
         self.parallel = parallel
+        self.nogil = nogil
         self._compiled: Any = None
         self._lock = threading.Lock()
         functools.update_wrapper(self, py_func)
@@ -80,7 +84,7 @@ class LazyKernel:
         rebuilt.__qualname__ = source.__qualname__
         rebuilt.__module__ = source.__module__
         rebuilt.__doc__ = source.__doc__
-        return numba.njit(cache=True, parallel=self.parallel)(rebuilt)
+        return numba.njit(cache=True, parallel=self.parallel, nogil=self.nogil)(rebuilt)
 
     def __call__(self, *args: Any) -> Any:
         return self.compiled()(*args)
@@ -90,13 +94,15 @@ class LazyKernel:
         return f"<LazyKernel {self.py_func.__module__}.{self.py_func.__qualname__} ({state})>"
 
 
-def jit(*, parallel: bool = False) -> Callable[[Callable[..., Any]], LazyKernel]:
+def jit(*, parallel: bool = False, nogil: bool = False) -> Callable[[Callable[..., Any]], LazyKernel]:
     """Decorator: compile the function with numba on its first call (:class:`LazyKernel`).
 
     Parameters
     ----------
     parallel : bool
         Compile with ``parallel=True``; the kernel's parallel loops use :data:`prange`.
+    nogil : bool
+        Compile with ``nogil=True`` (the kernel releases the GIL while it runs).
 
     Examples
     --------
@@ -111,6 +117,6 @@ def jit(*, parallel: bool = False) -> Callable[[Callable[..., Any]], LazyKernel]
     """
 
     def decorate(py_func: Callable[..., Any]) -> LazyKernel:
-        return LazyKernel(py_func, parallel)
+        return LazyKernel(py_func, parallel, nogil)
 
     return decorate

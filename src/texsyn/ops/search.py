@@ -28,17 +28,19 @@ from collections.abc import Callable
 import numpy as np
 
 from .jit import jit, prange
-from .linalg import matmul
+from .linalg import matmul, parallel_map, worker_count
 from .patches import as_channels
 
 __all__ = [
     "knn_select",
+    "BoundedNearestIndex",
     "FFTPatchSearch",
     "NearestPatchIndex",
     "WeightedPatchBank",
     "knn_patches",
     "nearest_both_ways",
     "nearest_rows",
+    "nearest_rows_bounded",
 ]
 
 
@@ -432,3 +434,505 @@ class NearestPatchIndex:
             index[start : start + m] = pick
             distance[start : start + m] = best[:, 0]
         return index, distance
+
+
+# ---------------------------------------------------------------------- proven nearest rows
+#: unit roundoff of float64 and float32
+_U64 = 2.0**-53
+_U32 = 2.0**-24
+
+
+def _gamma(n: float, u: float) -> float:
+    """Higham's ``gamma_n = n u / (1 - n u)``: the relative error bound of an ``n``-term sum."""
+    return n * u / (1.0 - n * u)
+
+
+@jit()
+def _squared_distance(q, b):
+    """``sum (q - b)^2`` in float64, with four partial sums (error at most ``gamma_{D+3}`` relative)."""
+    n = q.shape[0]
+    a0 = 0.0
+    a1 = 0.0
+    a2 = 0.0
+    a3 = 0.0
+    t = 0
+    while t + 4 <= n:
+        d0 = q[t] - b[t]
+        d1 = q[t + 1] - b[t + 1]
+        d2 = q[t + 2] - b[t + 2]
+        d3 = q[t + 3] - b[t + 3]
+        a0 += d0 * d0
+        a1 += d1 * d1
+        a2 += d2 * d2
+        a3 += d3 * d3
+        t += 4
+    while t < n:
+        d0 = q[t] - b[t]
+        a0 += d0 * d0
+        t += 1
+    return (a0 + a1) + (a2 + a3)
+
+
+@jit(nogil=True)
+def _band(coefficients, x):
+    """A band around a squared distance ``x``: ``c[0] x + c[1] sqrt(x) + c[2]`` (increasing in ``x``)."""
+    return coefficients[0] * x + coefficients[1] * np.sqrt(x) + coefficients[2]
+
+
+@jit(nogil=True)
+def _fold_max(maxima, values, n):
+    """``maxima[k] = max(maxima[k], values[k])`` for ``k < n`` (a loop the compiler vectorises)."""
+    for k in range(n):
+        v = values[k]
+        maxima[k] = v if v > maxima[k] else maxima[k]
+
+
+@jit(nogil=True)
+def _bounded_seeds(queries, bank, seeds, lo, hi, gamma_x, best_j, best_x, upper, keep_j, keep_x, kept):
+    """Start a part of a :class:`BoundedNearestIndex` search from the seeds (``-1``: none).
+
+    Every distinct seed's exact distance bounds the smallest distance from above; the seeds
+    in the part's rows ``lo .. hi - 1`` are its first kept rows.
+    """
+    m, n_seeds = seeds.shape
+    for i in range(m):
+        bx = np.inf
+        bj = -1
+        n = 0
+        for t in range(n_seeds):
+            j = seeds[i, t]
+            seen = j < 0
+            for r in range(t):
+                seen = seen or seeds[i, r] == j
+            if seen:
+                continue
+            x = _squared_distance(queries[i], bank[j])
+            if x * (1.0 + gamma_x) < upper[i]:
+                upper[i] = x * (1.0 + gamma_x)
+            if lo <= j < hi:
+                keep_j[i, n] = j
+                keep_x[i, n] = x
+                n += 1
+                if x < bx or (x == bx and j < bj):
+                    bx = x
+                    bj = j
+        best_j[i] = bj
+        best_x[i] = bx
+        kept[i] = n
+
+
+@jit(nogil=True)
+def _bounded_chunk(
+    gram, lo, queries, bank, seeds, q_sq, q_err, l_err, q_res, q_res_err, q_ext, q_res2, q_res2_err,
+    records, b_err_max, sigma, gamma_x, gamma_e, band, best_j, best_x, upper, keep_j, keep_x, kept,
+    overflow,
+):  # fmt: skip
+    """Search the bank rows ``lo, lo + 1, ...`` of one chunk (see :class:`BoundedNearestIndex`).
+
+    ``gram[i, c]`` is the float32 product of the projections of query ``i`` and bank row
+    ``lo + c``, less half the squared norm of the bank row's projection (the product of the
+    projections extended by 1 and that half norm): ``-gram`` is half the projected squared
+    distance less the query's own half norm. Pass 1 takes the maxima of ``gram`` over
+    blocks of 16 interleaved columns (``b, b + n_blocks, ...``); while no upper bound of the
+    smallest distance is known (no seeds), the row of the largest value is evaluated first.
+    Pass 2 visits the blocks whose maximum may lie over the threshold of the bound ``upper`` and
+    turns each value into a proven lower bound of the squared distance (projection and
+    residual parts, every rounding error included); the rows that pass get a second bound
+    from the next coordinates (``q_ext`` and the bank's, float32 values compared directly)
+    and the residual beyond them, and the rows that pass both get their exact distance,
+    which tightens the bound. ``records[j]`` holds what the bounds need of bank row ``j``,
+    side by side: its projection error bound, residual norm and its error bound, residual
+    norm beyond the next coordinates and its error bound, then the next coordinates. The
+    state carried from chunk to chunk, per query: the best row and
+    its distance, the bound, the rows kept (every row whose distance may lie within
+    ``band(i, x) = band[i, 0] x + band[i, 1] sqrt(x) + band[i, 2]`` of the smallest ``x`` is
+    among them) and whether more than ``keep_j.shape[1]``
+    had to be kept.
+    """
+    m, width = gram.shape
+    capacity = keep_j.shape[1]
+    n_blocks = (width + 15) // 16
+    n_seeds = seeds.shape[1]
+    n_ext = q_ext.shape[1]
+    maxima = np.empty(n_blocks, dtype=np.float32)
+    for i in range(m):
+        row = gram[i]
+        q_extra = q_ext[i]
+        maxima[:] = -np.inf
+        for s in range(16):
+            off = s * n_blocks
+            _fold_max(maxima, row[off:], min(n_blocks, width - off))
+        q = queries[i]
+        bx = best_x[i]
+        bj = best_j[i]
+        n_kept = kept[i]
+        j0 = -1
+        if upper[i] == np.inf:  # no seed: start from the smallest projected distance
+            first = 0
+            for b in range(1, n_blocks):
+                if maxima[b] > maxima[first]:
+                    first = b
+            v0 = np.float32(-np.inf)
+            for s in range(16):
+                c = s * n_blocks + first
+                if c < width and row[c] > v0:
+                    v0 = row[c]
+                    j0 = lo + c
+            x = _squared_distance(q, bank[j0])
+            upper[i] = x * (1.0 + gamma_x)
+            keep_j[i, n_kept] = j0
+            keep_x[i, n_kept] = x
+            n_kept += 1
+            if x < bx or (x == bx and j0 < bj):
+                bx = x
+                bj = j0
+        # a row can pass only if sqrt(L - l_err) - q_err - b_err_max <= sigma sqrt(upper + band)
+        bound = upper[i] + _band(band[i], upper[i])
+        reach = sigma * np.sqrt(bound) + q_err[i] + b_err_max
+        limit = 0.5 * (reach * reach + l_err[i] - q_sq[i])
+        floor32 = -np.float32(limit + 1e-6 * abs(limit) + 1e-30)
+        full = overflow[i]
+        for b in range(n_blocks):
+            if maxima[b] < floor32:
+                continue
+            for s in range(16):
+                c = s * n_blocks + b
+                if c >= width:
+                    break
+                if row[c] < floor32:
+                    continue
+                v = -row[c]
+                j = lo + c
+                seen = j == j0
+                for t in range(n_seeds):
+                    seen = seen or seeds[i, t] == j
+                if seen:
+                    continue
+                rec = records[j]
+                proj = q_sq[i] + 2.0 * np.float64(v) - l_err[i]
+                gap = (np.sqrt(proj) if proj > 0.0 else 0.0) - q_err[i] - rec[0]
+                lower = (gap / sigma) ** 2 if gap > 0.0 else 0.0
+                res = abs(q_res[i] - rec[1]) - q_res_err[i] - rec[2]
+                if res > 0.0:
+                    lower += res * res
+                if lower > bound:
+                    continue
+                if n_ext > 0:  # the next coordinates and the residual beyond them
+                    ext = 0.0
+                    for t in range(n_ext):
+                        e = q_extra[t] - rec[5 + t]
+                        ext += e * e
+                    proj += ext * (1.0 - gamma_e)
+                    gap = (np.sqrt(proj) if proj > 0.0 else 0.0) - q_err[i] - rec[0]
+                    lower = (gap / sigma) ** 2 if gap > 0.0 else 0.0
+                    res = abs(q_res2[i] - rec[3]) - q_res2_err[i] - rec[4]
+                    if res > 0.0:
+                        lower += res * res
+                    if lower > bound:
+                        continue
+                x = _squared_distance(q, bank[j])
+                if x < bx or (x == bx and j < bj):
+                    bx = x
+                    bj = j
+                if x * (1.0 + gamma_x) < upper[i]:
+                    upper[i] = x * (1.0 + gamma_x)
+                    bound = upper[i] + _band(band[i], upper[i])
+                    reach = sigma * np.sqrt(bound) + q_err[i] + b_err_max
+                    limit = 0.5 * (reach * reach + l_err[i] - q_sq[i])
+                    floor32 = -np.float32(limit + 1e-6 * abs(limit) + 1e-30)
+                if n_kept == capacity:  # drop the rows that can no longer be within the band
+                    cut = bx * (1.0 + 3.0 * gamma_x) + (1.0 + gamma_x) * _band(band[i], bx * (1.0 + gamma_x))
+                    n = 0
+                    for t in range(n_kept):
+                        if keep_x[i, t] <= cut:
+                            keep_j[i, n] = keep_j[i, t]
+                            keep_x[i, n] = keep_x[i, t]
+                            n += 1
+                    n_kept = n
+                if n_kept == capacity:
+                    full = True
+                else:
+                    keep_j[i, n_kept] = j
+                    keep_x[i, n_kept] = x
+                    n_kept += 1
+        best_j[i] = bj
+        best_x[i] = bx
+        kept[i] = n_kept
+        overflow[i] = full
+
+
+@jit()
+def _bounded_merge(best_j, best_x, keep_x, kept, overflow, gamma_x, bands, index, distance, counts):
+    """Join the parts of :func:`_bounded_part`: the best row, and the rows within each band."""
+    n_parts, m = best_j.shape
+    capacity = keep_x.shape[2]
+    for i in range(m):
+        bj = best_j[0, i]
+        bx = best_x[0, i]
+        full = overflow[0, i]
+        for p in range(1, n_parts):
+            full = full or overflow[p, i]
+            if best_x[p, i] < bx or (best_x[p, i] == bx and best_j[p, i] < bj):
+                bx = best_x[p, i]
+                bj = best_j[p, i]
+        index[i] = bj
+        distance[i] = bx
+        for t in range(bands.shape[1]):
+            if full:
+                counts[i, t] = capacity + 1
+                continue
+            cut = bx * (1.0 + 3.0 * gamma_x) + (1.0 + gamma_x) * _band(bands[i, t], bx * (1.0 + gamma_x))
+            n = 0
+            for p in range(n_parts):
+                for r in range(kept[p, i]):
+                    if keep_x[p, i, r] <= cut:
+                        n += 1
+            counts[i, t] = n
+
+
+class BoundedNearestIndex:
+    """Exact nearest bank rows, proven: projected lower bounds screen, float64 distances decide.
+
+    The bank is centred and projected on its ``dims`` leading principal directions; a block
+    of queries is compared with every bank row through one float32 product of the
+    projections (:func:`texsyn.ops.linalg.matmul`). For every pair, the projected distance
+    and the distance between the residual norms (the parts outside the projection) give a
+    lower bound of the squared distance in which every rounding error of the float32 and
+    float64 arithmetic is accounted for (Higham's ``gamma_n`` bounds); only the rows whose
+    bound is under the best exact distance found so far get their exact float64 distance
+    ``sum (q - b)^2``. The answer is the row of smallest exact distance and, per query, an
+    upper bound of the number of rows whose true distance may lie within given bands of
+    the smallest. A caller that knows how far another arithmetic (its reference search)
+    can be from the true distances uses a count of 1 as a proof that the reference would
+    choose the same row, and runs the reference where the count is larger
+    (:func:`nearest_rows_bounded`, ``docs/methods/wei_levoy.md``, "Performance"). Queries
+    never change the index.
+
+    Parameters
+    ----------
+    bank : ndarray, shape (K, D)
+        The rows searched (kept as float64).
+    dims : int
+        Dimension of the projection (at most ``D``).
+    block : int
+        Queries searched together.
+    chunk : int
+        Bank rows per product (a multiple of 16; memory: ``block * chunk`` float32 per
+        worker, meant to stay in the core's cache).
+    capacity : int
+        Candidate rows kept per query; a query needing more is reported with the count
+        ``capacity + 1``.
+    """
+
+    def __init__(
+        self,
+        bank: np.ndarray,
+        *,
+        dims: int = 32,
+        extra: int = 32,
+        block: int = 256,
+        chunk: int = 2048,
+        capacity: int = 256,
+    ):
+        bank = np.ascontiguousarray(bank, dtype=np.float64)
+        if bank.ndim != 2 or bank.shape[0] == 0:
+            raise ValueError(f"bank must be a non-empty (K, D) array, got shape {bank.shape}")
+        d = bank.shape[1]
+        self.bank = bank
+        self.norm_max = float(np.sqrt(np.max(np.einsum("kd,kd->k", bank, bank))))
+        self.mean = bank.mean(axis=0)
+        centred = bank - self.mean
+        dims = int(min(max(dims, 1), d))
+        total = int(min(dims + max(extra, 0), d))
+        _, vectors = np.linalg.eigh(centred.T @ centred)
+        self.basis = np.ascontiguousarray(vectors[:, ::-1][:, :total])
+        self.dims = dims
+        self._ortho = float(np.linalg.norm(self.basis.T @ self.basis - np.eye(total), 2)) + 1e-15
+        self._sigma = float(np.sqrt(1.0 + self._ortho)) * (1.0 + 1e-12)
+        full = centred @ self.basis
+        proj = full[:, :dims]
+        proj32 = proj.astype(np.float32)
+        p64 = proj32.astype(np.float64)
+        p_sq = np.einsum("kd,kd->k", p64, p64)
+        # the products come out less half the bank rows' squared norms: [p, 1] . [b, -|b|^2 / 2]
+        self._proj32_t = np.ascontiguousarray(np.vstack([proj32.T, -(0.5 * p_sq).astype(np.float32)]))
+        self._proj_max = float(np.sqrt(p_sq.max()))
+        terms = self._side_terms(centred, full)
+        self._b_err_max = float(terms[0].max())
+        ext = full[:, dims:].astype(np.float32).astype(np.float64)
+        self._records = np.ascontiguousarray(np.column_stack(terms + (ext,)))
+        self.block = int(block)
+        self.chunk = int(chunk)
+        self.capacity = int(capacity)
+
+    def __len__(self) -> int:
+        return self.bank.shape[0]
+
+    def _side_terms(self, centred: np.ndarray, full: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Projection error bound, residual norms and their error bounds of centred rows.
+
+        ``full`` is ``centred @ basis``. ``err`` bounds the distance between the float32
+        coordinates (all of them) and the exact ones ``V^T x`` of the exact centred vector.
+        ``res`` and ``res2`` are the norms of the parts of ``x`` outside the first ``dims``
+        and outside all coordinates, from ``||x||^2`` less the squared coordinates; the
+        error of that difference is at most ``eps = 1.1 (3 sqrt(p) gamma_{D+p} + 4 omega +
+        4 u) ||x||^2`` (``omega``: ``V``'s departure from orthonormality), so the norms are
+        within ``res_err = sqrt(eps)`` of the exact ones.
+        """
+        d, p = self.basis.shape
+        size_sq = np.einsum("kd,kd->k", centred, centred)
+        size = np.sqrt(size_sq)
+        err = 1.2 * (_U32 + np.sqrt(p) * _gamma(d + 3, _U64)) * self._sigma * size
+        squares = full * full
+        head = squares[:, : self.dims].sum(axis=1)
+        tail = squares[:, self.dims :].sum(axis=1)
+        eps = 1.1 * (3.0 * np.sqrt(p) * _gamma(d + p, _U64) + 4.0 * self._ortho + 4.0 * _U64) * size_sq
+        res_err = np.sqrt(eps) + 1e-300
+        res = np.sqrt(np.maximum(size_sq - head, 0.0))
+        res2 = np.sqrt(np.maximum(size_sq - head - tail, 0.0))
+        return err, res, res_err, res2, res_err
+
+    def query(
+        self, queries: np.ndarray, bands: np.ndarray, seeds: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Nearest bank row of every query, and how many rows may lie within each band.
+
+        The bank is cut into as many column parts as texsyn's thread pool has workers; each
+        part is searched on its own (:func:`texsyn.ops.linalg.parallel_map`) and the parts
+        are joined. The answers do not depend on the cut: the row is the one of smallest
+        computed distance, and the counts are only ever compared with 1 by callers that fall
+        back to their reference otherwise.
+
+        Parameters
+        ----------
+        queries : ndarray, shape (Q, D)
+        bands : ndarray, shape (Q, B) or (Q, B, 3)
+            Non-negative margins on the squared distance, per query: constants, or the
+            coefficients ``(a, b, c)`` of the band ``a x + b sqrt(x) + c`` around the smallest
+            squared distance ``x`` (non-negative: the band grows with ``x``).
+        seeds : ndarray of int, shape (Q, S), optional
+            Rows likely to be near each query (``-1``: none), for a tight first bound.
+
+        Returns
+        -------
+        index : ndarray of int64, shape (Q,)
+            The row of smallest computed exact distance (the lowest on a tie).
+        distance : ndarray, shape (Q,)
+            Its computed squared distance (relative error at most ``gamma_{D+3}``).
+        counts : ndarray of int64, shape (Q, B)
+            For each band, at least the number of rows ``j`` with
+            ``||q - b_j||^2 <= x + band(x)``, ``x = min_k ||q - b_k||^2`` (every such row is
+            among those counted); ``capacity + 1`` when the query had too many candidates.
+        """
+        queries = np.ascontiguousarray(queries, dtype=np.float64)
+        n, d = queries.shape
+        bands = np.asarray(bands, dtype=np.float64)
+        if bands.ndim < 3:  # constant bands
+            constant = bands.reshape(n, -1)
+            bands = np.zeros(constant.shape + (3,))
+            bands[..., 2] = constant
+        bands = np.ascontiguousarray(bands)
+        if seeds is None:
+            seeds = np.full((n, 0), -1, dtype=np.int64)
+        seeds = np.ascontiguousarray(seeds, dtype=np.int64).reshape(n, -1)
+        index = np.empty(n, dtype=np.int64)
+        distance = np.empty(n)
+        counts = np.empty((n, bands.shape[1]), dtype=np.int64)
+        gamma_x = 1.01 * _gamma(d + 3, _U64)
+        gamma_e = 1.01 * _gamma(self.basis.shape[1] + 3, _U64)
+        for start in range(0, n, self.block):
+            stop = min(n, start + self.block)
+            self._search_block(
+                queries[start:stop], seeds[start:stop], bands[start:stop], gamma_x, gamma_e,
+                index[start:stop], distance[start:stop], counts[start:stop],
+            )  # fmt: skip
+        return index, distance, counts
+
+    def _search_block(
+        self,
+        q: np.ndarray,
+        seeds: np.ndarray,
+        bands: np.ndarray,
+        gamma_x: float,
+        gamma_e: float,
+        index: np.ndarray,
+        distance: np.ndarray,
+        counts: np.ndarray,
+    ) -> None:
+        """:meth:`query` of one block of queries, the bank cut into parts searched in parallel."""
+        k, m = len(self), q.shape[0]
+        n_parts = max(1, min(worker_count(), k // 1024))
+        edges = [16 * (k * p // (16 * n_parts)) for p in range(n_parts)] + [k]
+        centred = q - self.mean
+        full = centred @ self.basis
+        proj32 = np.ones((m, self.dims + 1), dtype=np.float32)
+        proj32[:, : self.dims] = full[:, : self.dims]
+        p64 = proj32[:, : self.dims].astype(np.float64)
+        q_sq = np.einsum("kd,kd->k", p64, p64)
+        l_err = 2.5 * _gamma(self.dims + 4, _U32) * (np.sqrt(q_sq) + self._proj_max) ** 2 + 1e-300
+        q_err, q_res, q_res_err, q_res2, q_res2_err = self._side_terms(centred, full)
+        q_ext = np.ascontiguousarray(full[:, self.dims :].astype(np.float32).astype(np.float64))
+        band = np.ascontiguousarray(bands.max(axis=1))  # a band above every band given
+        best_j = np.empty((n_parts, m), dtype=np.int64)
+        best_x = np.empty((n_parts, m))
+        upper = np.full((n_parts, m), np.inf)
+        keep_j = np.empty((n_parts, m, self.capacity), dtype=np.int64)
+        keep_x = np.empty((n_parts, m, self.capacity))
+        kept = np.empty((n_parts, m), dtype=np.int64)
+        overflow = np.zeros((n_parts, m), dtype=np.bool_)
+
+        def search_part(p: int) -> None:
+            lo, hi = edges[p], edges[p + 1]
+            _bounded_seeds(
+                q, self.bank, seeds, lo, hi, gamma_x, best_j[p], best_x[p], upper[p], keep_j[p],
+                keep_x[p], kept[p],
+            )  # fmt: skip
+            for c0 in range(lo, hi, self.chunk):
+                c1 = min(hi, c0 + self.chunk)
+                _bounded_chunk(
+                    proj32 @ self._proj32_t[:, c0:c1], c0, q, self.bank, seeds, q_sq, q_err, l_err,
+                    q_res, q_res_err, q_ext, q_res2, q_res2_err, self._records, self._b_err_max,
+                    self._sigma, gamma_x, gamma_e, band, best_j[p], best_x[p], upper[p], keep_j[p],
+                    keep_x[p], kept[p], overflow[p],
+                )  # fmt: skip
+
+        parallel_map(search_part, range(n_parts))
+        _bounded_merge(best_j, best_x, keep_x, kept, overflow, gamma_x, bands, index, distance, counts)
+
+
+def nearest_rows_bounded(
+    queries: np.ndarray,
+    bank: np.ndarray,
+    bank_norm: np.ndarray,
+    index: BoundedNearestIndex,
+    seeds: np.ndarray | None = None,
+) -> np.ndarray:
+    """:func:`nearest_rows`, the same rows, through a :class:`BoundedNearestIndex` of ``bank``.
+
+    :func:`nearest_rows` picks the smallest computed ``||b||^2 - 2 q . b``; whatever order
+    its products sum in, each value is within ``E = 2.2 gamma_{D+2} (max ||b|| + ||q||)^2``
+    of the true ``||q - b||^2 - ||q||^2``, so the row it picks has a true squared distance
+    within ``2 E`` of the smallest. Where the index proves that a single row lies within
+    that band, that row is :func:`nearest_rows`'s answer; a block of queries with any other
+    count (exact ties between identical rows) is answered by :func:`nearest_rows` itself, on
+    the whole block, so that its products are the ones it would have computed.
+
+    Parameters
+    ----------
+    queries : ndarray, shape (Q, D)
+    bank : ndarray, shape (K, D)
+        The rows ``index`` was built on.
+    bank_norm : ndarray, shape (K,)
+        ``np.sum(bank * bank, axis=1)``, as :func:`nearest_rows` takes it.
+    index : BoundedNearestIndex
+    seeds : ndarray of int, shape (Q, S), optional
+        Likely rows, passed to :meth:`BoundedNearestIndex.query`.
+    """
+    queries = np.asarray(queries, dtype=np.float64)
+    d = queries.shape[1]
+    q_norm = np.sqrt(np.einsum("kd,kd->k", queries, queries))
+    band = 2.0 * 2.2 * _gamma(d + 2, _U64) * (index.norm_max + q_norm) ** 2
+    best, _, counts = index.query(queries, band[:, None], seeds)
+    if np.any(counts[:, 0] != 1):
+        return nearest_rows(queries, bank, bank_norm)
+    return best

@@ -1,0 +1,62 @@
+"""The proven nearest-row search (texsyn.ops.search.BoundedNearestIndex) against brute force."""
+
+import numpy as np
+import pytest
+
+from texsyn.ops.linalg import fixed_order
+from texsyn.ops.search import BoundedNearestIndex, nearest_rows, nearest_rows_bounded
+
+
+def _bank(rng, k, d, duplicates=0):
+    # smooth, correlated rows (like image neighbourhoods) so that the projection matters
+    base = rng.random((k, 4)) @ rng.random((4, d)) + 0.05 * rng.random((k, d))
+    if duplicates:
+        base[-duplicates:] = base[:duplicates]
+    return base
+
+
+@pytest.mark.parametrize("dims,extra", [(8, 8), (16, 0), (4, 60)])
+def test_nearest_equals_brute_force_with_exact_distances(dims, extra):
+    rng = np.random.default_rng(0)
+    bank = _bank(rng, 3000, 60)
+    queries = bank[rng.integers(0, 3000, 200)] + 0.02 * rng.standard_normal((200, 60))
+    index = BoundedNearestIndex(bank, dims=dims, extra=extra, chunk=512)
+    with fixed_order():
+        best, dist, counts = index.query(queries, np.zeros((200, 1)))
+    exact = ((queries[:, None, :] - bank[None]) ** 2).sum(-1)
+    assert np.array_equal(best, exact.argmin(axis=1))
+    np.testing.assert_allclose(dist, exact.min(axis=1), rtol=1e-12)
+    assert np.all(counts[:, 0] >= 1)
+
+
+def test_counts_find_every_row_within_the_band_and_seeds_change_nothing():
+    rng = np.random.default_rng(1)
+    bank = _bank(rng, 2048, 30, duplicates=100)
+    queries = bank[rng.integers(0, 2048, 300)] + 0.01 * rng.standard_normal((300, 30))
+    queries[:50] = bank[1948:1998]  # exact copies of duplicated rows: two rows at distance 0
+    exact = ((queries[:, None, :] - bank[None]) ** 2).sum(-1)
+    band = 0.05 * np.ones(300)
+    index = BoundedNearestIndex(bank, dims=6, extra=6, chunk=256)
+    seeds = np.stack([rng.integers(-1, 2048, 300), exact.argmin(axis=1)], axis=1)
+    with fixed_order():
+        best, _, counts = index.query(queries, np.stack([np.zeros(300), band], axis=1))
+        best_seeded, _, counts_seeded = index.query(queries, np.stack([np.zeros(300), band], axis=1), seeds)
+    within = (exact <= exact.min(axis=1, keepdims=True) + band[:, None]).sum(axis=1)
+    assert np.all(counts[:, 1] >= within) and np.all(counts_seeded[:, 1] >= within)
+    assert np.all(counts[:50, 0] >= 2)  # the exact duplicates are counted
+    assert np.array_equal(best, exact.argmin(axis=1)) and np.array_equal(best_seeded, best)
+
+
+def test_nearest_rows_bounded_is_nearest_rows():
+    rng = np.random.default_rng(2)
+    bank = _bank(rng, 4096, 45, duplicates=50)
+    norms = np.sum(bank * bank, axis=1)
+    index = BoundedNearestIndex(bank, dims=12, extra=12)
+    with fixed_order():
+        for rows in (1, 7, 64):
+            queries = bank[rng.integers(0, 4096, rows)] + 0.03 * rng.standard_normal((rows, 45))
+            assert np.array_equal(
+                nearest_rows_bounded(queries, bank, norms, index), nearest_rows(queries, bank, norms)
+            )
+        ties = bank[4046:4056]  # rows with an identical twin: answered by nearest_rows itself
+        assert np.array_equal(nearest_rows_bounded(ties, bank, norms, index), nearest_rows(ties, bank, norms))
