@@ -151,3 +151,43 @@ def test_grouplet_frame_rejects_bad_input():
         frame.forward(np.zeros((5, 5)))
     with pytest.raises(ValueError):
         frame.inverse(np.zeros((2,) + SHAPE))
+
+
+@pytest.mark.parametrize("normalized", [False, True])
+def test_interleaved_blocks_give_the_bytes_of_the_one_image_scan(normalized):
+    """Issue 20: the frame scans several images at once (interleaved, in blocks on numba's
+    threads); every coefficient and pixel must be the bytes of the one-image reference scan,
+    with the normalisation by ``scales`` done afterwards in NumPy."""
+    from texsyn.transforms.grouplet_frame import (
+        _forward,
+        _forward_block,
+        _forward_rows,
+        _inverse,
+        _inverse_block,
+        _inverse_rows,
+    )
+
+    shape = (24, 20)
+    n = shape[0] * shape[1]
+    rng = np.random.default_rng(11)
+    frame = GroupletTightFrame(rng.integers(0, n, size=(3, n)), shape)
+    images = rng.standard_normal((5, n))
+    scales = frame.scales if normalized else np.ones((1, 1))
+    expected = np.stack([_forward(image, frame.orders, *frame._merges)[0] for image in images], axis=1)
+    if normalized:
+        expected = expected / frame.scales[:, None]
+    out = np.empty_like(expected)
+    _forward_block(images, frame.orders, *frame._merges, scales, normalized, out, 0, 5)
+    assert out.tobytes() == expected.tobytes()
+    threaded, _ = _forward_rows(images, frame.orders, *frame._merges, scales, normalized, 3)
+    assert threaded.tobytes() == expected.tobytes()
+    coefficients = expected + 0.1 * rng.standard_normal(expected.shape)  # off the range too
+    plain = coefficients * frame.scales[:, None] if normalized else coefficients
+    reference = np.stack(
+        [_inverse(np.ascontiguousarray(plain[:, b]), frame.orders, *frame._merges)[0] for b in range(5)]
+    )
+    back = np.empty((5, n))
+    _inverse_block(coefficients, frame.orders, *frame._merges, scales, normalized, back, 0, 5)
+    assert back.tobytes() == reference.tobytes()
+    threaded_back, _ = _inverse_rows(coefficients, frame.orders, *frame._merges, scales, normalized, 2)
+    assert threaded_back.tobytes() == reference.tobytes()

@@ -241,28 +241,30 @@ def _canonical_row(x, bits, keys, shift, order):
     n = keys.size
     s = np.uint64(shift)
     mask = (np.uint64(1) << s) - np.uint64(1)
-    for k in range(n):
-        order[k] = np.int64(keys[k] & mask)
     k = 0
     while k < n:
-        end = k + 1
         high = keys[k] >> s
+        order[k] = np.int64(keys[k] & mask)
+        if k + 1 == n or (keys[k + 1] >> s) != high:
+            k += 1
+            continue
+        end = k + 1  # a run of equal high bits
         while end < n and (keys[end] >> s) == high:
+            order[end] = np.int64(keys[end] & mask)
             end += 1
-        if end - k > 1:
-            first = x[order[k]]
-            mixed = False
-            for j in range(k + 1, end):
-                if x[order[j]] != first and not (first != first and x[order[j]] != x[order[j]]):
-                    mixed = True
-            if mixed:  # a stable sort of the run (in position order) by full value
-                full = np.empty(end - k, dtype=np.uint64)
-                for j in range(k, end):
-                    full[j - k] = _ordered_bits(x[order[j]], bits[order[j]])
-                by_value = np.argsort(full, kind="mergesort")
-                run = order[k:end].copy()
-                for j in range(end - k):
-                    order[k + j] = run[by_value[j]]
+        first = x[order[k]]
+        mixed = False
+        for j in range(k + 1, end):
+            if x[order[j]] != first and not (first != first and x[order[j]] != x[order[j]]):
+                mixed = True
+        if mixed:  # a stable sort of the run (in position order) by full value
+            full = np.empty(end - k, dtype=np.uint64)
+            for j in range(k, end):
+                full[j - k] = _ordered_bits(x[order[j]], bits[order[j]])
+            by_value = np.argsort(full, kind="mergesort")
+            run = order[k:end].copy()
+            for j in range(end - k):
+                order[k + j] = run[by_value[j]]
         k = end
 
 
@@ -270,12 +272,26 @@ def _canonical_row(x, bits, keys, shift, order):
 def _scatter_rows(x, bits, keys, shift, targets, rows, out, start, stop):
     """``out[i, order[k]] = targets[rows[i], k]`` for rows ``[start, stop)``, with each row's
     canonical order (:func:`_canonical_row`): the values in rank order, equal values by position."""
-    order = np.empty(x.shape[1], dtype=np.int64)
+    n = x.shape[1]
+    s = np.uint64(shift)
+    mask = (np.uint64(1) << s) - np.uint64(1)
+    order = np.empty(n, dtype=np.int64)
     for i in range(start, stop):
-        _canonical_row(x[i], bits[i], keys[i], shift, order)
+        key = keys[i]
         target = targets[rows[i]]
-        for k in range(order.size):
-            out[i, order[k]] = target[k]
+        row = out[i]
+        clean = True  # no two keys share their high bits: the keys' positions are the order
+        for k in range(n - 1):
+            if (key[k + 1] >> s) == (key[k] >> s):
+                clean = False
+                break
+        if clean:
+            for k in range(n):
+                row[np.int64(key[k] & mask)] = target[k]
+        else:
+            _canonical_row(x[i], bits[i], key, shift, order)
+            for k in range(n):
+                row[order[k]] = target[k]
 
 
 @jit(parallel=True)
