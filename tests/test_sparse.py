@@ -244,3 +244,17 @@ def test_too_small_exemplar_and_bad_steps_are_rejected():
         texsyn.make_method("sparse", patch_size=12, step=5).fit(np.zeros((64, 64)))
     with pytest.raises(ValueError, match="at least patch_size/2"):
         texsyn.make_method("sparse", patch_size=12, step=4).fit(np.zeros((64, 64)))
+
+
+@pytest.mark.parametrize("shape", [(264, 264, 3), (66, 66, 1), (37, 50, 3), (9, 7, 1)])
+def test_scipy_ffts_give_numpys_bytes(shape):
+    """Issue 20: the image step's FFTs run on scipy.fft (faster, lines on threads) and must
+    give the bytes of the numpy.fft calls they replace (the inverse one axis at a time)."""
+    from texsyn.ops.sparse import _irfft2, _rfft2
+
+    u = np.random.default_rng(13).standard_normal(shape)
+    spectrum = np.fft.rfft2(u, axes=(0, 1))
+    assert _rfft2(u).tobytes() == spectrum.tobytes()
+    assert (
+        _irfft2(spectrum, shape[:2]).tobytes() == np.fft.irfft2(spectrum, s=shape[:2], axes=(0, 1)).tobytes()
+    )

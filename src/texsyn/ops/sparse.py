@@ -21,6 +21,7 @@ from collections.abc import Callable
 from typing import Literal, overload
 
 import numpy as np
+from scipy import fft as sfft
 from scipy import linalg, ndimage
 
 from .jit import jit, prange
@@ -544,6 +545,25 @@ def _pursuit(corr, gram_rows, n_nonzero, limit):
 Projector = Callable[[np.ndarray, "np.random.Generator | None"], np.ndarray]
 
 
+def _rfft2(x: np.ndarray) -> np.ndarray:
+    """``numpy.fft.rfft2(x, axes=(0, 1))``, by :mod:`scipy.fft` with its lines on the worker threads.
+
+    Both run the same pocketfft transforms in the same order (``rfft`` of the last axis,
+    then ``fft`` of the first), so the bytes are NumPy's, on any number of threads (each
+    line is computed alone); SciPy's is faster (``tests/test_sparse.py``).
+    """
+    return sfft.rfft2(x, axes=(0, 1), workers=worker_count())
+
+
+def _irfft2(spectrum: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """``numpy.fft.irfft2(spectrum, s=shape, axes=(0, 1))`` by :mod:`scipy.fft`, one axis at a
+    time as NumPy does (each axis normalised by its own ``1/n``; SciPy's ``irfft2`` applies
+    ``1/(H W)`` at once, which rounds differently)."""
+    workers = worker_count()
+    rows = sfft.ifft(spectrum, n=shape[0], axis=0, workers=workers)
+    return sfft.irfft(rows, n=shape[1], axis=1, workers=workers)
+
+
 def upsample_bicubic(image: np.ndarray) -> np.ndarray:
     """Periodic cubic-spline up-sampling by 2 between two scales (Tartavel et al. 2013, 4.3).
 
@@ -576,7 +596,7 @@ def box_power(shape: tuple[int, int], tau: int) -> np.ndarray:
     """
     box = np.zeros(shape)
     box[:tau, :tau] = 1.0 / tau**2
-    return np.abs(np.fft.rfft2(box)) ** 2
+    return np.abs(_rfft2(box)) ** 2
 
 
 def lowpass_towards(u: np.ndarray, target: np.ndarray, weight: np.ndarray) -> np.ndarray:
@@ -593,9 +613,9 @@ def lowpass_towards(u: np.ndarray, target: np.ndarray, weight: np.ndarray) -> np
     weight : ndarray, shape (H, W // 2 + 1)
         Per-frequency weight in [0, 1] on the real-FFT grid.
     """
-    spec = np.fft.rfft2(u, axes=(0, 1))
-    spec += weight[..., None] * (np.fft.rfft2(target, axes=(0, 1)) - spec)
-    return np.fft.irfft2(spec, s=u.shape[:2], axes=(0, 1))
+    spec = _rfft2(u)
+    spec += weight[..., None] * (_rfft2(target) - spec)
+    return _irfft2(spec, u.shape[:2])
 
 
 class SpectrumProjector:
@@ -649,15 +669,17 @@ class SpectrumProjector:
         canvas[r0 : r0 + h, c0 : c0 + w] = spot * np.sqrt(big_h * big_w / (h * w))
         canvas += mean
         self.size = (big_h, big_w)
-        self.spectrum = np.fft.rfft2(canvas, axes=(0, 1))
+        self.spectrum = _rfft2(canvas)
         self.spectrum.flags.writeable = False
 
     def __call__(self, u: np.ndarray) -> np.ndarray:
-        spec = np.fft.rfft2(u, axes=(0, 1))
+        spec = _rfft2(u)
+        # np.conj inline: NumPy then multiplies into that temporary, and its vectorised
+        # complex product rounds differently with the operands swapped
         inner = np.sum(spec * np.conj(self.spectrum), axis=2)
         magnitude = np.abs(inner)
         phase = np.where(magnitude > 1e-300, inner / np.maximum(magnitude, 1e-300), 1.0)
-        return np.fft.irfft2(self.spectrum * phase[..., None], s=u.shape[:2], axes=(0, 1))
+        return _irfft2(self.spectrum * phase[..., None], u.shape[:2])
 
 
 def _reference_of(u: np.ndarray, reference) -> np.ndarray:
@@ -667,8 +689,8 @@ def _reference_of(u: np.ndarray, reference) -> np.ndarray:
 
 def _lowpass_apply(e: np.ndarray, power: np.ndarray) -> np.ndarray:
     """``h_bar * h * e`` per channel (periodic)."""
-    spec = np.fft.rfft2(e, axes=(0, 1)) * power[..., None]
-    return np.fft.irfft2(spec, s=e.shape[:2], axes=(0, 1))
+    spec = _rfft2(e) * power[..., None]
+    return _irfft2(spec, e.shape[:2])
 
 
 def image_update(
@@ -736,10 +758,8 @@ def image_energy(
     hist = np.sum((u - projector(u, None)) ** 2)
     low = 0.0
     if beta > 0:
-        filtered = np.fft.irfft2(
-            np.fft.rfft2(u - _reference_of(u, reference), axes=(0, 1)) * np.sqrt(box_power)[..., None],
-            s=u.shape[:2],
-            axes=(0, 1),
+        filtered = _irfft2(
+            _rfft2(u - _reference_of(u, reference)) * np.sqrt(box_power)[..., None], u.shape[:2]
         )
         low = np.sum(filtered**2)
     return float(data + alpha * hist + beta * low)
