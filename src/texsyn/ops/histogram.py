@@ -102,12 +102,12 @@ def _rank_with_random_ties(values: np.ndarray, keys: np.ndarray) -> np.ndarray:
     """
     rows = np.ascontiguousarray(np.atleast_2d(values), dtype=np.float64)
     tie_keys = np.atleast_2d(keys)
-    if _compiled_ranks(rows.size):  # by value, then position
+    if _compiled_ranks(rows.size):  # by value, then position; the rows without ties are done
         sorted_keys, shift = _sorted_keys(rows)
-        order = _order_by_key(rows, rows.view(np.uint64), sorted_keys, shift)
+        order, tied = _order_by_key(rows, rows.view(np.uint64), sorted_keys, shift)
     else:  # equal values in any order: the ties are sorted below anyway
-        order = np.argsort(rows, axis=-1)
-    for i in range(rows.shape[0]):
+        order, tied = np.argsort(rows, axis=-1), np.ones(rows.shape[0], dtype=bool)
+    for i in np.flatnonzero(tied):
         _sort_ties(rows[i], tie_keys[i], order[i])
     return order.reshape(np.shape(values))
 
@@ -232,7 +232,8 @@ def _packed_keys_parallel(x, bits, shift, keys):
 
 @jit()
 def _canonical_row(x, bits, keys, shift, order):
-    """``order``: the positions of a row by value, then by position, from its sorted keys.
+    """``order``: the positions of a row by value, then by position, from its sorted keys;
+    returns whether two keys shared their high bits (equal values need that).
 
     Each run of keys with equal high bits is in position order; a run whose values are not
     all equal is sorted again, stably, by full value: such runs need two values within
@@ -241,6 +242,7 @@ def _canonical_row(x, bits, keys, shift, order):
     n = keys.size
     s = np.uint64(shift)
     mask = (np.uint64(1) << s) - np.uint64(1)
+    runs = False
     k = 0
     while k < n:
         high = keys[k] >> s
@@ -248,6 +250,7 @@ def _canonical_row(x, bits, keys, shift, order):
         if k + 1 == n or (keys[k + 1] >> s) != high:
             k += 1
             continue
+        runs = True
         end = k + 1  # a run of equal high bits
         while end < n and (keys[end] >> s) == high:
             order[end] = np.int64(keys[end] & mask)
@@ -266,6 +269,7 @@ def _canonical_row(x, bits, keys, shift, order):
             for j in range(end - k):
                 order[k + j] = run[by_value[j]]
         k = end
+    return runs
 
 
 @jit()
@@ -302,10 +306,11 @@ def _scatter_parallel(x, bits, keys, shift, targets, rows, out):
 
 
 @jit()
-def _order_rows(x, bits, keys, shift, order, start, stop):
-    """Every row's canonical order (:func:`_canonical_row`), ``(B, N)`` positions."""
+def _order_rows(x, bits, keys, shift, order, runs, start, stop):
+    """Every row's canonical order (:func:`_canonical_row`), ``(B, N)`` positions, and
+    whether it may hold equal values."""
     for i in range(start, stop):
-        _canonical_row(x[i], bits[i], keys[i], shift, order[i])
+        runs[i] = _canonical_row(x[i], bits[i], keys[i], shift, order[i])
 
 
 #: values from which the rank kernels run the rows on numba's threads (below, starting and
@@ -337,11 +342,13 @@ def _scatter_by_key(x, bits, keys, shift: int, targets, rows) -> np.ndarray:
     return out
 
 
-def _order_by_key(x, bits, keys, shift: int) -> np.ndarray:
-    """Every row's canonical order, ``(B, N)`` positions (rows are few here: one thread)."""
+def _order_by_key(x, bits, keys, shift: int) -> tuple[np.ndarray, np.ndarray]:
+    """Every row's canonical order, ``(B, N)`` positions, and whether the row may hold equal
+    values (rows are few here: one thread)."""
     order = np.empty(x.shape, dtype=np.int64)
-    _order_rows(x, bits, keys, shift, order, 0, x.shape[0])
-    return order
+    runs = np.zeros(x.shape[0], dtype=np.bool_)
+    _order_rows(x, bits, keys, shift, order, runs, 0, x.shape[0])
+    return order, runs
 
 
 def _argsort_rows(x: np.ndarray) -> np.ndarray:
