@@ -321,7 +321,9 @@ def _inverse_rows(coefficients, src, dst, detail, share, low, scales, normalized
         b0 = min(rows, c * size)
         b1 = min(rows, b0 + size)
         if b1 > b0:
-            counts[c] = _inverse_block(coefficients, src, dst, detail, share, low, scales, normalized, out, b0, b1)
+            counts[c] = _inverse_block(
+                coefficients, src, dst, detail, share, low, scales, normalized, out, b0, b1
+            )
     return out, counts
 
 
@@ -413,7 +415,9 @@ class GroupletTightFrame:
             self.last_count = int(counts[0])
         else:
             out = np.empty((self.levels + 1,) + flat.shape)
-            count = _forward_block(flat, self.orders, *self._merges, factors, normalized, out, 0, flat.shape[0])
+            count = _forward_block(
+                flat, self.orders, *self._merges, factors, normalized, out, 0, flat.shape[0]
+            )
             self.last_count = int(count) if flat.shape[0] else 0
         return out.reshape((self.levels + 1,) + batch + self.shape)
 
@@ -437,7 +441,9 @@ class GroupletTightFrame:
             self.last_count = int(counts[0])
         else:
             out = np.empty(flat.shape[1:])
-            count = _inverse_block(flat, self.orders, *self._merges, factors, normalized, out, 0, flat.shape[1])
+            count = _inverse_block(
+                flat, self.orders, *self._merges, factors, normalized, out, 0, flat.shape[1]
+            )
             self.last_count = int(count) if flat.shape[1] else 0
         return out.reshape(batch + self.shape)
 

@@ -177,7 +177,8 @@ class WaveletGroupletTransform:
         c = np.asarray(coefficients, dtype=np.float64)
         levels, bands, channels = c.shape[:3]
         planes = self.grouplets.inverse(
-            c.reshape((levels, bands * channels) + self.shape), scales=self._scales if self.normalized else None
+            c.reshape((levels, bands * channels) + self.shape),
+            scales=self._scales if self.normalized else None,
         )
         image = self.pyramid.inverse_planes(planes.reshape((bands, channels) + self.shape))
         return np.moveaxis(image, 0, -1)
