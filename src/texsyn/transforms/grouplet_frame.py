@@ -32,6 +32,11 @@ translation) the masses are ``2^l`` everywhere and the transform is the undecima
 transform along the flow lines. The inverse undoes the merges in reverse order, which gives
 two estimates of every pixel (as a source and as a group start); their mean is the adjoint,
 i.e. the ``tau_l`` reconstruction above.
+
+Why this module is long: the schedule of the merges (scan order, masses, factors) and the
+forward and inverse scans that replay it share the conventions above, and each scan comes
+as a block of interleaved images plus its threaded driver (issue 20); split apart, every
+part would have to restate them.
 """
 
 from __future__ import annotations
@@ -156,69 +161,15 @@ def _schedule(targets, orders, masses):
 
 
 @jit()
-def _forward(image, src, dst, detail, share, low):
-    """Sequential in-place scan; returns the ``(L+1, N)`` coefficients and the number of updates.
+def _forward_block(images, src, dst, detail, share, low, scales, normalized, out, b0, b1):
+    """The sequential in-place scan of images ``b0 .. b1 - 1`` of ``(B, N)`` together, into ``out`` ``(L+1, B, N)``.
 
     Merge ``k`` of level ``l``: ``d_l(m) = detail (a(m) - r(p))``, ``r(p) += share (a(m) - r(p))``
-    (the mass-weighted average of the group and ``m``). The reference of one image:
-    :func:`_forward_block` computes several interleaved, with the same bytes
-    (``tests/test_grouplet_frame.py``).
-    """
-    levels, n = src.shape
-    out = np.empty((levels + 1, n))
-    a = image.copy()
-    count = 0
-    for lv in range(levels):
-        r = a.copy()  # the residual, updated in place
-        for k in range(n):
-            m = src[lv, k]
-            p = dst[lv, k]
-            diff = a[m] - r[p]
-            out[lv, m] = detail[lv, k] * diff
-            r[p] += share[lv, k] * diff
-            count += 1
-        a = r
-    for m in range(n):
-        out[levels, m] = low[m] * a[m]
-        count += 1
-    return out, count
-
-
-@jit()
-def _inverse(coefficients, src, dst, detail, share, low):
-    """Undo the merges in reverse order; the mean of each pixel's two estimates is the adjoint.
-
-    The reference of one image for :func:`_inverse_block`.
-    """
-    levels, n = src.shape
-    count = 0
-    r = np.empty(n)
-    for m in range(n):
-        r[m] = coefficients[levels, m] / low[m]
-        count += 1
-    for lv in range(levels - 1, -1, -1):
-        source = np.empty(n)
-        for k in range(n - 1, -1, -1):
-            m = src[lv, k]
-            p = dst[lv, k]
-            delta = coefficients[lv, m] / detail[lv, k]  # a(m) - r(p) before the merge
-            old = r[p] - share[lv, k] * delta
-            source[m] = old + delta
-            r[p] = old
-            count += 1
-        for m in range(n):
-            r[m] = 0.5 * (r[m] + source[m])
-    return r, count
-
-
-@jit()
-def _forward_block(images, src, dst, detail, share, low, scales, normalized, out, b0, b1):
-    """:func:`_forward` of images ``b0 .. b1 - 1`` of ``(B, N)`` together, into ``out`` ``(L+1, B, N)``.
-
-    The images are interleaved (one row of ``b1 - b0`` values per pixel), so each merge loads
-    its pixels, target and factors once for all of them; every value gets the arithmetic of
-    :func:`_forward` in the same order, so the same bytes. With ``normalized`` each
-    coefficient is then divided by ``scales[l, m]``. Returns the updates per image.
+    (the mass-weighted average of the group and ``m``). The images are interleaved (one row of
+    ``b1 - b0`` values per pixel), so each merge loads its pixels, target and factors once for
+    all of them; every value gets the arithmetic of the one-image scan in the same order, so
+    the same bytes (``tests/test_grouplet_frame.py``). With ``normalized`` each coefficient is
+    then divided by ``scales[l, m]``. Returns the updates per image.
     """
     levels, n = src.shape
     nb = b1 - b0
@@ -252,7 +203,7 @@ def _forward_block(images, src, dst, detail, share, low, scales, normalized, out
 
 @jit(parallel=True)
 def _forward_rows(images, src, dst, detail, share, low, scales, normalized, n_blocks):
-    """:func:`_forward` of every row of ``images`` ``(B, N)``: ``(L+1, B, N)``, in ``n_blocks``
+    """The scan of every row of ``images`` ``(B, N)``: ``(L+1, B, N)``, in ``n_blocks``
     blocks of interleaved images on numba's threads (:func:`_forward_block`)."""
     levels = src.shape[0]
     rows = images.shape[0]
@@ -269,9 +220,10 @@ def _forward_rows(images, src, dst, detail, share, low, scales, normalized, n_bl
 
 @jit()
 def _inverse_block(coefficients, src, dst, detail, share, low, scales, normalized, out, b0, b1):
-    """:func:`_inverse` of images ``b0 .. b1 - 1`` of ``(L+1, B, N)`` coefficients together
-    (interleaved, as in :func:`_forward_block`), into ``out`` ``(B, N)``; with ``normalized``
-    each coefficient is first multiplied by ``scales[l, m]``. Returns the updates per image."""
+    """Undo the merges of images ``b0 .. b1 - 1`` of ``(L+1, B, N)`` coefficients in reverse
+    order, interleaved as in :func:`_forward_block`, into ``out`` ``(B, N)``; the mean of each
+    pixel's two estimates is the adjoint. With ``normalized`` each coefficient is first
+    multiplied by ``scales[l, m]``. Returns the updates per image."""
     levels, n = src.shape
     nb = b1 - b0
     r = np.empty((n, nb))
@@ -311,7 +263,7 @@ def _inverse_block(coefficients, src, dst, detail, share, low, scales, normalize
 
 @jit(parallel=True)
 def _inverse_rows(coefficients, src, dst, detail, share, low, scales, normalized, n_blocks):
-    """:func:`_inverse` of every image of ``(L+1, B, N)`` coefficients: ``(B, N)``, in blocks
+    """The inverse of every image of ``(L+1, B, N)`` coefficients: ``(B, N)``, in blocks
     of interleaved images on numba's threads (:func:`_inverse_block`)."""
     rows = coefficients.shape[1]
     out = np.empty((rows, coefficients.shape[2]))
