@@ -118,23 +118,46 @@ def test_periodic_component_of_a_periodic_smooth_image_is_close_to_itself():
     assert np.abs(s).max() < 0.05
 
 
-@pytest.mark.parametrize("quantum", [None, 0.5, 0.1])
+@pytest.mark.parametrize("quantum", [None, 0.5, 0.1, "ulp"])
 def test_numpy_and_compiled_rank_scatters_give_the_same_bytes(quantum):
     """``match_sorted_rows`` uses NumPy until numba is loaded (start-up, issue 20) and the
-    compiled kernel after: both put equal values in position order."""
-    from texsyn.ops.histogram import _argsort_rows, _scatter_by_rank, _scatter_by_rank_numpy
+    compiled packed-key ranks after: both put equal values in position order, and values
+    that differ only in their last bits (a run of equal high key bits) in value order."""
+    from texsyn.ops.histogram import _argsort_rows, _scatter_by_rank_numpy
+    from texsyn.ops.ranks import scatter_by_key, sorted_keys
 
     rng = np.random.default_rng(3)
     x = rng.standard_normal((5, 3000))
-    if quantum is not None:
+    if quantum == "ulp":
+        x = 1.0 + rng.integers(0, 50, x.shape) * 2.0**-52  # equal high bits, distinct values
+        x[4, ::4] = -0.0
+        x[4, 1::4] = 0.0
+    elif quantum is not None:
         x = np.round(x / quantum) * quantum
     x[2, :50] = 0.0  # a long run, and runs that reach the row's ends
     targets = np.sort(rng.standard_normal((7, 3000)), axis=1)
     rows = np.array([6, 0, 3, 3, 1])
     order = _argsort_rows(x)
-    compiled = _scatter_by_rank(x, order.copy(), targets, rows)
+    keys, shift = sorted_keys(x)
+    compiled = scatter_by_key(x, keys, shift, targets, rows)
     assert np.array_equal(_scatter_by_rank_numpy(x, order.copy(), targets, rows), compiled)
     stable = np.argsort(x, axis=1, kind="stable")
     expected = np.empty_like(x)
     np.put_along_axis(expected, stable, targets[rows], axis=1)
     assert np.array_equal(compiled, expected)
+
+
+def test_random_tie_break_is_lexsort():
+    """``match_sorted(..., rng)`` orders equal values by a random key: the ranks of
+    ``lexsort((random, values))``, computed from one sort and the ties only."""
+    from texsyn.ops.histogram import _rank_with_random_ties
+
+    rng = np.random.default_rng(5)
+    for quantum in (None, 0.5, 0.05):
+        v = rng.standard_normal(4000)
+        if quantum is not None:
+            v = np.round(v / quantum) * quantum
+        v[::9] = -0.0
+        v[5::11] = np.nan
+        keys = np.round(rng.random(v.size), 2)  # equal keys too: then by position
+        assert np.array_equal(_rank_with_random_ties(v, keys), np.lexsort((keys, v)))

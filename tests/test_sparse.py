@@ -244,3 +244,170 @@ def test_too_small_exemplar_and_bad_steps_are_rejected():
         texsyn.make_method("sparse", patch_size=12, step=5).fit(np.zeros((64, 64)))
     with pytest.raises(ValueError, match="at least patch_size/2"):
         texsyn.make_method("sparse", patch_size=12, step=4).fit(np.zeros((64, 64)))
+
+
+@pytest.mark.parametrize("shape", [(264, 264, 3), (66, 66, 1), (37, 50, 3), (9, 7, 1)])
+def test_scipy_ffts_give_numpys_bytes(shape):
+    """Issue 20: the image step's FFTs run on scipy.fft (faster, lines on threads) and must
+    give the bytes of the numpy.fft calls they replace (the inverse one axis at a time)."""
+    from texsyn.ops.sparse import _irfft2, _rfft2
+
+    u = np.random.default_rng(13).standard_normal(shape)
+    spectrum = np.fft.rfft2(u, axes=(0, 1))
+    assert _rfft2(u).tobytes() == spectrum.tobytes()
+    assert (
+        _irfft2(spectrum, shape[:2]).tobytes() == np.fft.irfft2(spectrum, s=shape[:2], axes=(0, 1)).tobytes()
+    )
+
+
+# ---------------------------------------------------------------- issue 20: fast paths, same bytes
+def heap_pursuit(patches, d, s, budget):
+    """texsyn 0.3's constrained matching pursuit in Python (one heap entry per patch): the
+    reference the compiled kernel must reproduce byte for byte."""
+    import heapq
+
+    g = d.T @ d
+    corr = d.T @ patches
+    n_atoms, n_patches = corr.shape
+    limit = np.full(n_atoms, np.iinfo(np.int64).max) if budget is None else np.asarray(budget, dtype=np.int64)
+    w = np.zeros((n_atoms, n_patches))
+    used = np.zeros((n_atoms, n_patches), dtype=bool)
+    per_patch = np.zeros(n_patches, dtype=np.int64)
+    per_atom = np.zeros(n_atoms, dtype=np.int64)
+
+    def best_atom(k):
+        avail = used[:, k] | (per_atom < limit) if per_patch[k] < s else used[:, k]
+        return int(np.argmax(np.where(avail, np.abs(corr[:, k]), -1.0))) if avail.any() else -1
+
+    best = np.array([best_atom(k) for k in range(n_patches)])
+    heap = [(-abs(corr[best[k], k]), k) for k in range(n_patches) if best[k] >= 0]
+    heapq.heapify(heap)
+    steps = 0
+    while steps < s * n_patches and heap:
+        _, k = heapq.heappop(heap)
+        n = int(best[k])
+        if not used[n, k] and (per_patch[k] >= s or per_atom[n] >= limit[n]):
+            best[k] = best_atom(k)
+            if best[k] >= 0:
+                heapq.heappush(heap, (-abs(corr[best[k], k]), k))
+            continue
+        c = corr[n, k]
+        if abs(c) < 1e-12:
+            break
+        if not used[n, k]:
+            used[n, k], per_patch[k], per_atom[n] = True, per_patch[k] + 1, per_atom[n] + 1
+        w[n, k] += c
+        corr[:, k] -= c * g[:, n]
+        best[k] = best_atom(k)
+        if best[k] >= 0:
+            heapq.heappush(heap, (-abs(corr[best[k], k]), k))
+        steps += 1
+    return w
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_compiled_pursuit_is_the_python_heap_pursuit_byte_for_byte(seed):
+    rng = np.random.default_rng(seed)
+    dim, n_atoms, n_patches = int(rng.integers(4, 30)), int(rng.integers(3, 40)), int(rng.integers(1, 200))
+    d = unit_dictionary(rng, dim, n_atoms)
+    p = rng.standard_normal((dim, n_patches))
+    p[:, : n_patches // 4] = 0.0  # patches with nothing to code
+    s = int(rng.integers(1, 5))
+    budget = None if seed % 2 else rng.integers(0, 3 * n_patches // n_atoms + 2, n_atoms)
+    ref = heap_pursuit(p, d, s, budget)
+    assert constrained_matching_pursuit(p, d, s, budget).tobytes() == ref.tobytes()
+
+
+def reference_batch_omp(d, x, s):
+    """texsyn 0.3's batch OMP in NumPy and SciPy (the Gram update as a CSR product)."""
+    from scipy.sparse import csr_matrix
+
+    g = d.T @ d
+    n_atoms, n_signals = d.shape[1], x.shape[1]
+    xtd = x.T @ d
+    corr = xtd.copy()
+    codes = np.zeros((n_signals, n_atoms))
+    support = np.zeros((n_signals, 0), dtype=np.int64)
+    rows = np.arange(n_signals)
+    active = np.ones(n_signals, dtype=bool)
+    floor = 1e-12 * np.sqrt(np.maximum(np.einsum("ij,ij->j", x, x), 1e-300))
+    for _ in range(min(s, n_atoms)):
+        score = np.abs(corr)
+        if support.shape[1]:
+            score[rows[:, None], support] = -1.0
+        pick = np.argmax(score, axis=1)
+        active &= score[rows, pick] > floor
+        if not active.any():
+            break
+        support = np.concatenate([support, pick[:, None]], axis=1)
+        idx = np.flatnonzero(active)
+        sup = support[idx]
+        coef = np.linalg.solve(
+            g[sup[:, :, None], sup[:, None, :]], np.take_along_axis(xtd[idx], sup, axis=1)[..., None]
+        )[..., 0]
+        codes[idx] = 0.0
+        codes[idx[:, None], sup] = coef
+        sparse = csr_matrix(
+            (coef.ravel(), (np.repeat(np.arange(idx.size), sup.shape[1]), sup.ravel())),
+            shape=(idx.size, n_atoms),
+        )
+        corr[idx] = xtd[idx] - sparse @ g
+    return np.ascontiguousarray(codes.T)
+
+
+@pytest.mark.parametrize("threads", [False, True])
+def test_compiled_batch_omp_is_the_numpy_batch_omp_byte_for_byte(threads, monkeypatch):
+    """Selection and Gram update in compiled row kernels, on numba's threads or not."""
+    import texsyn.ops.sparse as sparse_ops
+
+    monkeypatch.setattr(sparse_ops, "_PARALLEL_ROWS_WORK", 0 if threads else 1 << 62)
+    rng = np.random.default_rng(21)
+    for trial in range(8):
+        d = unit_dictionary(rng, int(rng.integers(4, 40)), int(rng.integers(3, 60)))
+        if trial % 3 == 1:
+            d[:, 1] = d[:, 0]  # tied correlations
+        x = rng.standard_normal((d.shape[0], int(rng.integers(1, 300))))
+        x[:, ::5] = 2.0 * d[:, :1]  # represented exactly after one atom
+        x[:, 1::7] = 0.0
+        s = int(rng.integers(1, 6))
+        assert batch_omp(d, x, s).tobytes() == reference_batch_omp(d, x, s).tobytes()
+
+
+def test_ksvd_kernels_are_the_numpy_column_updates():
+    """K-SVD keeps the residual as rows; gathering an atom's error and writing it back must
+    give the bytes of the column expressions, and the eigenvector that of scipy's eigh."""
+    from scipy import linalg
+
+    from texsyn.ops.sparse import _gather_error, _scatter_error, _top_eigenvector
+
+    rng = np.random.default_rng(22)
+    residual = rng.standard_normal((30, 500))
+    codes, atom = rng.standard_normal(500), rng.standard_normal(30)
+    users = np.sort(rng.choice(500, 37, replace=False))
+    rows = np.ascontiguousarray(residual.T)
+    err = _gather_error(rows, users, codes, atom)
+    expected = residual[:, users] + np.outer(atom, codes[users])
+    assert err.tobytes() == expected.tobytes()
+    coeffs, new_atom = rng.standard_normal(37), rng.standard_normal(30)
+    _scatter_error(rows, users, err, coeffs, new_atom)
+    residual[:, users] = expected - np.outer(new_atom, coeffs)
+    assert rows.tobytes() == np.ascontiguousarray(residual.T).tobytes()
+    gram = err.T @ err
+    _, vec = linalg.eigh(gram, subset_by_index=[36, 36])
+    assert _top_eigenvector(gram).tobytes() == vec[:, 0].tobytes()
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_batched_graph_cuts_are_the_item_by_item_line(seed):
+    """With single overlaps every seam of a closed line is cut at once: the same costs and
+    cuts, so the same bytes, as item by item."""
+    from texsyn.ops.graphcut import _assemble_line, _assemble_line_sequential
+
+    rng = np.random.default_rng(seed)
+    tau, step = [(6, 3), (12, 6), (8, 8), (9, 6)][seed]
+    items = rng.random((int(rng.integers(2, 9)), int(rng.integers(3, 20)), tau, 3))
+    if seed == 1:
+        items = np.round(items, 1)  # tied costs
+    length = items.shape[0] * step
+    fast = _assemble_line(items, step, length, tau - step)
+    assert fast.tobytes() == _assemble_line_sequential(items, step, length, tau - step).tobytes()

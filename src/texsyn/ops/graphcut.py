@@ -41,13 +41,28 @@ def kwatra_costs(old: np.ndarray, new: np.ndarray) -> tuple[np.ndarray, np.ndarr
     b = np.asarray(new, dtype=np.float64)
     if a.ndim == 2:
         a, b = a[..., None], b[..., None]
-    diff = np.sum((a - b) ** 2, axis=2)
-    num_h = diff[:, :-1] + diff[:, 1:]
-    num_v = diff[:-1, :] + diff[1:, :]
-    den_h = np.sum((a[:, :-1] - a[:, 1:]) ** 2 + (b[:, :-1] - b[:, 1:]) ** 2, axis=2)
-    den_v = np.sum((a[:-1] - a[1:]) ** 2 + (b[:-1] - b[1:]) ** 2, axis=2)
-    mean_den = np.concatenate([den_h.ravel(), den_v.ravel()]).mean() if den_h.size + den_v.size else 0.0
-    eps = 1e-3 * mean_den + 1e-12
+    cost_h, cost_v = _kwatra_costs_stack(a[None], b[None])
+    return cost_h[0], cost_v[0]
+
+
+def _kwatra_costs_stack(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`kwatra_costs` of a stack of overlaps ``(S, h, w, C)``: ``(S, h, w-1)``, ``(S, h-1, w)``.
+
+    Every sum runs over the last axis of a fresh contiguous array, with the same NumPy
+    reductions for one overlap as for many: the costs of each overlap are the bytes of a
+    call on it alone (``tests/test_sparse.py``).
+    """
+    diff = np.sum((a - b) ** 2, axis=3)
+    num_h = diff[:, :, :-1] + diff[:, :, 1:]
+    num_v = diff[:, :-1, :] + diff[:, 1:, :]
+    den_h = np.sum((a[:, :, :-1] - a[:, :, 1:]) ** 2 + (b[:, :, :-1] - b[:, :, 1:]) ** 2, axis=3)
+    den_v = np.sum((a[:, :-1] - a[:, 1:]) ** 2 + (b[:, :-1] - b[:, 1:]) ** 2, axis=3)
+    count = a.shape[0]
+    if den_h[0].size + den_v[0].size:
+        mean_den = np.concatenate([den_h.reshape(count, -1), den_v.reshape(count, -1)], axis=1).mean(axis=1)
+    else:
+        mean_den = np.zeros(count)
+    eps = (1e-3 * mean_den + 1e-12)[:, None, None]
     return num_h / (den_h + eps), num_v / (den_v + eps)
 
 
@@ -156,6 +171,17 @@ def _flood_from_left(cut_h, cut_v):
     return seen
 
 
+@jit()
+def _seams_take_old(cost_h, cost_v):
+    """:func:`seam_take_old`'s cut of every overlap of a stack, from its costs ``(S, ...)``."""
+    count, h = cost_h.shape[0], cost_h.shape[1]
+    keep = np.empty((count, h, cost_h.shape[2] + 1), dtype=np.bool_)
+    for k in range(count):
+        cut_h, cut_v = _dual_shortest_cut(cost_h[k], cost_v[k])
+        keep[k] = _flood_from_left(cut_h, cut_v)
+    return keep
+
+
 def seam_take_old(old: np.ndarray, new: np.ndarray) -> np.ndarray:
     """Exact minimum-cost seam between ``old`` (left column forced) and ``new`` (right column).
 
@@ -209,20 +235,62 @@ def graphcut_reassemble(patches: np.ndarray, step: int, shape: tuple[int, int]) 
     V. Kwatra, A. Schodl, I. Essa, G. Turk, A. Bobick, "Graphcut textures", SIGGRAPH 2003;
     Tartavel, Gousseau, Peyre (2013), section 4.1, eq. (8).
     """
-    kr, tau = patches.shape[0], patches.shape[2]
-    channels = patches.shape[4]
+    kr, kc, tau = patches.shape[:3]
     height, width = shape
     o = tau - step
+    if 0 < o <= step and kc * step == width and kr * step == height:  # every seam at once
+        strips = _assemble_closed_lines(patches, step, o)  # (kr, tau, width, C)
+        rows = strips.transpose(0, 2, 1, 3)[None]  # strips as (width, tau) "patches"
+        return _assemble_closed_lines(rows, step, o)[0].transpose(1, 0, 2)
+    channels = patches.shape[4]
     strips = np.empty((kr, tau, width, channels))
     for i in range(kr):
         strips[i] = _assemble_line(patches[i], step, width, o)
-    rows = np.ascontiguousarray(strips.transpose(0, 2, 1, 3))  # strips as (width, tau) "patches"
+    rows = np.ascontiguousarray(strips.transpose(0, 2, 1, 3))
     canvas_t = _assemble_line(rows, step, height, o)  # (width, height, C)
     return canvas_t.transpose(1, 0, 2)
 
 
 def _assemble_line(items: np.ndarray, step: int, length: int, o: int) -> np.ndarray:
-    """Join ``items`` (each ``(h, tau, C)``) side by side on a periodic line of ``length``."""
+    """Join ``items`` (each ``(h, tau, C)``) side by side on a periodic line of ``length``.
+
+    With single overlaps (``o <= step``) on a closed line (``count step == length``) every
+    seam is between the tail of one item and the head of the next, whatever the other seams
+    are, so all of them are cut at once (:func:`_assemble_closed_lines`); otherwise, or with
+    ``o = 0``, item by item (:func:`_assemble_line_sequential`, the reference).
+    """
+    count = items.shape[0]
+    if 0 < o <= step and count * step == length:
+        return _assemble_closed_lines(items[None], step, o)[0]
+    return _assemble_line_sequential(items, step, length, o)
+
+
+def _assemble_closed_lines(items: np.ndarray, step: int, o: int) -> np.ndarray:
+    """:func:`_assemble_line_sequential` of ``B`` closed lines ``(B, count, h, tau, C)`` with
+    single overlaps (``0 < o <= step``), all seams cut at once: ``(B, h, count step, C)``.
+
+    Columns ``[c step, c step + o)`` of a line are the seam between the tail
+    ``items[c - 1][:, tau - o:]`` (the old content; the last item's for ``c = 0``, the
+    wrap-around) and the head ``items[c][:, :o]``; columns ``[c step + o, (c + 1) step)`` are
+    ``items[c]``'s own. The same costs and cuts as item by item, so the same bytes.
+    """
+    lines, count, h, tau, channels = items.shape
+    tails = np.roll(items[:, :, :, tau - o :], 1, axis=1).reshape(lines * count, h, o, channels)
+    heads = items[:, :, :, :o].reshape(lines * count, h, o, channels)
+    if o < 2:
+        joined = tails
+    else:
+        cost_h, cost_v = _kwatra_costs_stack(tails, heads)
+        keep = _seams_take_old(cost_h, cost_v)
+        joined = np.where(keep[..., None], tails, heads)
+    out = np.empty((lines, h, count, step, channels))
+    out[:, :, :, :o] = joined.reshape(lines, count, h, o, channels).transpose(0, 2, 1, 3, 4)
+    out[:, :, :, o:] = items[:, :, :, o:step].transpose(0, 2, 1, 3, 4)
+    return out.reshape(lines, h, count * step, channels)
+
+
+def _assemble_line_sequential(items: np.ndarray, step: int, length: int, o: int) -> np.ndarray:
+    """:func:`_assemble_line` item by item: each seam cut against the line built so far."""
     count, h, tau, channels = items.shape
     line = np.zeros((h, length, channels))
     line[:, :tau] = items[0]

@@ -16,6 +16,7 @@ anyway).
 from __future__ import annotations
 
 import functools
+import os
 import threading
 import types
 from collections.abc import Callable
@@ -68,6 +69,8 @@ class LazyKernel:
         return self._compiled is not None
 
     def _compile(self) -> Any:
+        if self.parallel:
+            _passive_openmp()
         import numba
 
         source = self.py_func
@@ -92,6 +95,18 @@ class LazyKernel:
     def __repr__(self) -> str:
         state = "compiled" if self._compiled is not None else "not compiled yet"
         return f"<LazyKernel {self.py_func.__module__}.{self.py_func.__qualname__} ({state})>"
+
+
+def _passive_openmp() -> None:
+    """Let numba's OpenMP threads sleep between parallel loops unless the user chose otherwise.
+
+    GNU OpenMP's default keeps a thread spinning after each parallel loop; on a 2-core
+    machine that spinning takes the core from texsyn's own threads (BLAS tiles, FFT lines,
+    sorts) and, when other processes share the machine, doubles the CPU time of a parallel
+    kernel (``docs/performance.md``, "Threads"). Read when the OpenMP runtime starts, so
+    set before numba loads it; ``OMP_WAIT_POLICY`` from the environment wins.
+    """
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 
 def jit(*, parallel: bool = False, nogil: bool = False) -> Callable[[Callable[..., Any]], LazyKernel]:

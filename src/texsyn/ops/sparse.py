@@ -15,15 +15,17 @@ conventions; split apart, each half would need the other's conventions restated.
 
 from __future__ import annotations
 
+import functools
 import heapq
 from collections.abc import Callable
 from typing import Literal, overload
 
 import numpy as np
+from scipy import fft as sfft
 from scipy import linalg, ndimage
-from scipy.sparse import csr_matrix
 
-from .linalg import matmul
+from .jit import jit, prange
+from .linalg import matmul, worker_count
 from .patches import as_channels, extract_patches
 
 __all__ = [
@@ -74,64 +76,207 @@ def batch_omp(
     """
     d = np.asarray(dictionary, dtype=np.float64)
     x = np.asarray(signals, dtype=np.float64)
-    g = d.T @ d if gram is None else gram
+    g = np.ascontiguousarray(d.T @ d if gram is None else gram, dtype=np.float64)
     n_atoms, n_signals = d.shape[1], x.shape[1]
+    n_steps = min(n_nonzero, n_atoms)
     xtd = matmul(x.T, d)  # (K, N): rows are contiguous for the per-signal argmax
-    corr = xtd.copy()
-    codes = np.zeros((n_signals, n_atoms))
-    support = np.zeros((n_signals, 0), dtype=np.int64)
-    rows = np.arange(n_signals)
+    corr = np.empty_like(xtd)  # written for every signal still active after a step
+    codes = np.zeros((n_atoms, n_signals))
+    support = np.zeros((n_signals, n_steps), dtype=np.int64)
     active = np.ones(n_signals, dtype=bool)
     floor = 1e-12 * np.sqrt(np.maximum(np.einsum("ij,ij->j", x, x), 1e-300))
-    for _ in range(min(n_nonzero, n_atoms)):
-        score = np.abs(corr)
-        if support.shape[1]:
-            score[rows[:, None], support] = -1.0  # never re-select an atom
-        pick = np.argmax(score, axis=1)
-        # signals already represented exactly stop growing (their residual is zero)
-        active &= score[rows, pick] > floor
+    for step in range(n_steps):
+        # the atom of largest |correlation| outside the support; signals already
+        # represented exactly stop growing (their residual is zero)
+        scores = xtd if step == 0 else corr
+        work = n_signals * n_atoms
+        _rows_kernel(
+            _omp_select_rows, _omp_select_parallel, n_signals, work, scores, support, step, floor, active
+        )
         if not active.any():
             break
-        support = np.concatenate([support, pick[:, None]], axis=1)
         idx = np.flatnonzero(active)
-        sup = support[idx]
+        sup = support[idx, : step + 1]
         sub_gram = g[sup[:, :, None], sup[:, None, :]]  # (k, s, s)
-        rhs = np.take_along_axis(xtd[idx], sup, axis=1)  # (k, s)
+        rhs = xtd[idx[:, None], sup]  # (k, s)
         coef = np.linalg.solve(sub_gram, rhs[..., None])[..., 0]
-        codes[idx] = 0.0
-        codes[idx[:, None], sup] = coef
-        # D^T r = D^T x - G w with w sparse
-        sparse = csr_matrix(
-            (coef.ravel(), (np.repeat(np.arange(idx.size), sup.shape[1]), sup.ravel())),
-            shape=(idx.size, n_atoms),
+        # D^T r = D^T x - G w with w sparse, and the codes of the new support
+        work = idx.size * n_atoms * (step + 2)
+        _rows_kernel(
+            _omp_update_rows, _omp_update_parallel, idx.size, work, corr, codes, xtd, g, idx, sup, coef
         )
-        corr[idx] = xtd[idx] - sparse @ g
-    return np.ascontiguousarray(codes.T)
+    return codes
+
+
+#: multiply-adds from which a pursuit step runs its rows on numba's threads: below, starting
+#: and stopping them costs more than it saves (and much more on a loaded machine)
+_PARALLEL_ROWS_WORK = 1 << 21
+
+
+def _rows_kernel(serial, parallel, n_rows: int, work: int, *args) -> None:
+    """Run ``serial(*args, start, stop)`` over the rows, in parallel chunks for large ``work``.
+
+    Each row is computed alone, so the result is the same however the rows are split.
+    """
+    if work >= _PARALLEL_ROWS_WORK and worker_count() > 1 and n_rows > 1:
+        parallel(*args, n_rows, worker_count())
+    else:
+        serial(*args, 0, n_rows)
+
+
+@jit()
+def _omp_select_rows(corr, support, step, floor, active, start, stop):
+    """One selection of :func:`batch_omp` for the active signals (rows of ``corr``) in
+    ``[start, stop)``.
+
+    ``support[i, step]`` becomes the first atom of largest ``|corr[i]|`` among those not in
+    ``support[i, :step]`` (``numpy.argmax`` of the scores with the support at -1), and the
+    signal stays active while that score exceeds ``floor[i]``.
+    """
+    n_atoms = corr.shape[1]
+    score = np.empty(n_atoms)
+    for i in range(start, stop):
+        if not active[i]:
+            continue
+        for n in range(n_atoms):
+            score[n] = abs(corr[i, n])
+        for t in range(step):
+            score[support[i, t]] = -1.0
+        best = 0
+        for n in range(1, n_atoms):
+            if score[n] > score[best]:
+                best = n
+        support[i, step] = best
+        active[i] = score[best] > floor[i]
+
+
+@jit(parallel=True)
+def _omp_select_parallel(corr, support, step, floor, active, n_rows, n_chunks):
+    """:func:`_omp_select_rows` over ``n_chunks`` chunks of rows on numba's threads."""
+    size = (n_rows + n_chunks - 1) // n_chunks
+    for c in prange(n_chunks):
+        _omp_select_rows(corr, support, step, floor, active, c * size, min(n_rows, (c + 1) * size))
+
+
+@jit()
+def _omp_update_rows(corr, codes, xtd, gram, idx, sup, coef, start, stop):
+    """``corr[i] = xtd[i] - sum_t coef[j, t] gram[sup[j, t]]`` and column ``i`` of the codes
+    ``(N, K)``, for the signals ``i = idx[j]``, ``j`` in ``[start, stop)``.
+
+    The sum runs over the support in increasing atom order from zero, as the product of a
+    sorted CSR matrix and a dense one (SciPy's ``csr_matvecs``) adds it.
+    """
+    n_atoms = corr.shape[1]
+    size = sup.shape[1]
+    total = np.empty(n_atoms)
+    order = np.empty(size, dtype=np.int64)
+    for j in range(start, stop):
+        i = idx[j]
+        for t in range(size):  # insertion sort of the support positions by atom
+            k = t
+            while k > 0 and sup[j, order[k - 1]] > sup[j, t]:
+                order[k] = order[k - 1]
+                k -= 1
+            order[k] = t
+        total[:] = 0.0
+        for t in order:
+            a = sup[j, t]
+            c = coef[j, t]
+            for n in range(n_atoms):
+                total[n] += c * gram[a, n]
+        for n in range(n_atoms):
+            corr[i, n] = xtd[i, n] - total[n]
+        for t in range(size):
+            codes[sup[j, t], i] = coef[j, t]
+
+
+@jit(parallel=True)
+def _omp_update_parallel(corr, codes, xtd, gram, idx, sup, coef, n_rows, n_chunks):
+    """:func:`_omp_update_rows` over ``n_chunks`` chunks of signals on numba's threads."""
+    size = (n_rows + n_chunks - 1) // n_chunks
+    for c in prange(n_chunks):
+        _omp_update_rows(corr, codes, xtd, gram, idx, sup, coef, c * size, min(n_rows, (c + 1) * size))
+
+
+@functools.cache
+def _syevr(n: int) -> tuple[Callable, int, int]:
+    """LAPACK's ``dsyevr`` and the workspace sizes it asks for at order ``n`` (lower triangle)."""
+    driver, query = linalg.get_lapack_funcs(("syevr", "syevr_lwork"), (np.zeros((1, 1)),))
+    work, iwork, info = query(n=n, lower=1)
+    if info != 0:
+        raise np.linalg.LinAlgError(f"dsyevr workspace query failed ({info})")
+    return driver, int(work.real), int(iwork)
+
+
+def _top_eigenvector(gram: np.ndarray) -> np.ndarray:
+    """The eigenvector of the largest eigenvalue of a symmetric matrix.
+
+    The call :func:`scipy.linalg.eigh` makes for ``subset_by_index=[n - 1, n - 1]`` (``dsyevr``
+    on the lower triangle, same workspace), without its per-call checks: K-SVD makes one
+    per atom and iteration.
+    """
+    n = gram.shape[0]
+    driver, lwork, liwork = _syevr(n)
+    _, vec, found, _, info = driver(
+        a=gram, compute_v=1, range="I", lower=1, il=n, iu=n, lwork=lwork, liwork=liwork, overwrite_a=0
+    )
+    if info != 0 or found != 1:
+        raise np.linalg.LinAlgError(f"dsyevr failed on a {n}x{n} Gram matrix ({info})")
+    return vec[:, 0]
 
 
 def _rank_one(err: np.ndarray, previous: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The best rank-one approximation ``atom coeffs^T`` of ``err`` (its leading singular pair).
 
     Computed from the leading eigenpair of the smaller Gram matrix (``err^T err`` or
-    ``err err^T``, :func:`scipy.linalg.eigh` restricted to the top eigenvalue); the sign is
+    ``err err^T``, :func:`_top_eigenvector`); the sign is
     chosen so that ``atom . previous >= 0``, which keeps the result deterministic.
     """
     rows, cols = err.shape
     if cols <= rows:
         gram = matmul(err.T, err)
-        _, vec = linalg.eigh(gram, subset_by_index=[cols - 1, cols - 1])
-        atom = err @ vec[:, 0]
+        vec = _top_eigenvector(gram)
+        atom = err @ vec
         norm = float(np.linalg.norm(atom))
         if norm < 1e-12:
             return previous, np.zeros(cols)
         atom /= norm
     else:
         gram = matmul(err, err.T)
-        _, vec = linalg.eigh(gram, subset_by_index=[rows - 1, rows - 1])
-        atom = vec[:, 0].copy()
+        atom = _top_eigenvector(gram).copy()
     if atom @ previous < 0:
         atom = -atom
     return atom, atom @ err
+
+
+#: patches handled together by the K-SVD gather and scatter (a tile of the transposition)
+_TILE = 8
+
+
+@jit()
+def _gather_error(residual_rows, users, codes, atom):
+    """``E = R[:, users] + atom codes[users]^T`` (K-SVD's error without the atom), ``(L, |users|)``,
+    from the residual stored as rows ``R^T`` (one per training patch), by tiles of patches."""
+    n_dims = residual_rows.shape[1]
+    err = np.empty((n_dims, users.size))
+    for j0 in range(0, users.size, _TILE):
+        j1 = min(j0 + _TILE, users.size)
+        for i in range(n_dims):
+            for j in range(j0, j1):
+                u = users[j]
+                err[i, j] = residual_rows[u, i] + atom[i] * codes[u]
+    return err
+
+
+@jit()
+def _scatter_error(residual_rows, users, err, coeffs, atom):
+    """``R[:, users] = E - atom coeffs^T`` on the residual stored as rows (in place)."""
+    n_dims = residual_rows.shape[1]
+    for j0 in range(0, users.size, _TILE):
+        j1 = min(j0 + _TILE, users.size)
+        for i in range(n_dims):
+            for j in range(j0, j1):
+                residual_rows[users[j], i] = err[i, j] - atom[i] * coeffs[j]
 
 
 @overload
@@ -251,15 +396,19 @@ def ksvd(
             stalled += 1
             if tol > 0 and stalled >= patience:
                 break  # converged: the last updates no longer lower the coding error
+        # the residual with one row per training patch: the patches of an atom are gathered
+        # and written back as whole rows (the same values and arithmetic as by columns)
+        residual_rows = np.ascontiguousarray(residual.T)
         for n in range(n_atoms):
             users = np.flatnonzero(w[n])
             if users.size == 0:
+                residual = np.ascontiguousarray(residual_rows.T)
                 worst = int(np.argmax(np.einsum("ij,ij->j", residual, residual)))
                 patch = x[:, worst]
                 norm = float(np.linalg.norm(patch))
                 d[:, n] = patch / norm if norm > 1e-12 else d[:, n]
                 continue
-            err = residual[:, users] + np.outer(d[:, n], w[n, users])
+            err = _gather_error(residual_rows, users, w[n], d[:, n])
             if update == "svd":
                 atom, coeffs = _rank_one(err, d[:, n])
             else:
@@ -271,7 +420,7 @@ def ksvd(
                 coeffs = atom @ err
             d[:, n] = atom
             w[n, users] = coeffs
-            residual[:, users] = err - np.outer(atom, coeffs)
+            _scatter_error(residual_rows, users, err, coeffs, atom)
     d /= np.maximum(np.linalg.norm(d, axis=0), 1e-300)
     if return_errors:
         return d, np.asarray(errors)
@@ -312,51 +461,81 @@ def constrained_matching_pursuit(
     d = np.asarray(dictionary, dtype=np.float64)
     g = d.T @ d if gram is None else gram
     corr = matmul(d.T, np.asarray(patches, dtype=np.float64))  # (N, K): <r_k, d_n>
-    n_atoms, n_patches = corr.shape
+    n_atoms = corr.shape[0]
     limit = np.full(n_atoms, np.iinfo(np.int64).max) if budget is None else np.asarray(budget, dtype=np.int64)
-    w = np.zeros((n_atoms, n_patches))
-    used = np.zeros((n_atoms, n_patches), dtype=bool)
+    # one row per patch and per atom: the kernel reads and updates a patch's correlations
+    # (and a Gram column) contiguously; the values are copies, the arithmetic unchanged
+    w = _pursuit(
+        np.ascontiguousarray(corr.T),
+        np.ascontiguousarray(np.asarray(g, dtype=np.float64).T),
+        int(n_nonzero),
+        np.ascontiguousarray(limit),
+    )
+    return np.ascontiguousarray(w.T)
+
+
+@jit()
+def _best_atom(corr_k, used_k, room, per_atom, limit):
+    """The available atom of largest ``|corr|`` for one patch (the first on ties), or -1.
+
+    An atom is available when the patch already uses it, or when the patch has ``room``
+    for one more atom and the atom is below its budget.
+    """
+    best = -1
+    score = -1.0
+    for n in range(corr_k.size):
+        if used_k[n] or (room and per_atom[n] < limit[n]):
+            value = abs(corr_k[n])
+            if value > score or best < 0:
+                best, score = n, value
+    return best
+
+
+@jit()
+def _pursuit(corr, gram_rows, n_nonzero, limit):
+    """Algorithm 2 of Tartavel et al. (2013) on ``corr`` ``(K, N)`` (updated in place).
+
+    ``gram_rows[n]`` is column ``n`` of the Gram matrix. The heap holds one entry
+    ``(-|corr|, k)`` per patch, so its pops follow the order of those pairs whatever the
+    heap's layout: the same steps as the reference's Python heap. Returns the codes ``(K, N)``.
+    """
+    n_patches, n_atoms = corr.shape
+    w = np.zeros((n_patches, n_atoms))
+    used = np.zeros((n_patches, n_atoms), dtype=np.bool_)
     per_patch = np.zeros(n_patches, dtype=np.int64)
     per_atom = np.zeros(n_atoms, dtype=np.int64)
-
-    def best_atom(k: int) -> int:
-        if per_patch[k] < n_nonzero:
-            avail = used[:, k] | (per_atom < limit)
-        else:
-            avail = used[:, k]
-        if not avail.any():
-            return -1
-        score = np.where(avail, np.abs(corr[:, k]), -1.0)
-        return int(np.argmax(score))
-
-    heap = []
     best = np.full(n_patches, -1, dtype=np.int64)
+    heap = [(0.0, np.int64(0))]
+    heap.pop()
     for k in range(n_patches):
-        best[k] = best_atom(k)
+        best[k] = _best_atom(corr[k], used[k], per_patch[k] < n_nonzero, per_atom, limit)
         if best[k] >= 0:
-            heap.append((-abs(corr[best[k], k]), k))
+            heap.append((-abs(corr[k, best[k]]), np.int64(k)))
     heapq.heapify(heap)
     steps = 0
-    while steps < n_nonzero * n_patches and heap:
-        key, k = heapq.heappop(heap)
-        n = int(best[k])
-        if not used[n, k] and (per_patch[k] >= n_nonzero or per_atom[n] >= limit[n]):
-            best[k] = best_atom(k)
+    while steps < n_nonzero * n_patches and len(heap) > 0:
+        _, k = heapq.heappop(heap)
+        n = best[k]
+        if not used[k, n] and (per_patch[k] >= n_nonzero or per_atom[n] >= limit[n]):
+            best[k] = _best_atom(corr[k], used[k], per_patch[k] < n_nonzero, per_atom, limit)
             if best[k] >= 0:
-                heapq.heappush(heap, (-abs(corr[best[k], k]), k))
+                heapq.heappush(heap, (-abs(corr[k, best[k]]), k))
             continue
-        c = corr[n, k]
+        c = corr[k, n]
         if abs(c) < 1e-12:
             break
-        if not used[n, k]:
-            used[n, k] = True
+        if not used[k, n]:
+            used[k, n] = True
             per_patch[k] += 1
             per_atom[n] += 1
-        w[n, k] += c
-        corr[:, k] -= c * g[:, n]
-        best[k] = best_atom(k)
+        w[k, n] += c
+        column = gram_rows[n]
+        row = corr[k]
+        for i in range(n_atoms):
+            row[i] -= c * column[i]
+        best[k] = _best_atom(row, used[k], per_patch[k] < n_nonzero, per_atom, limit)
         if best[k] >= 0:
-            heapq.heappush(heap, (-abs(corr[best[k], k]), k))
+            heapq.heappush(heap, (-abs(row[best[k]]), k))
         steps += 1
     return w
 
@@ -364,6 +543,25 @@ def constrained_matching_pursuit(
 # ---------------------------------------------------------------------------- image step
 #: a histogram projection ``T_hist(u, rng)``: :class:`texsyn.ops.HistogramMatcher`
 Projector = Callable[[np.ndarray, "np.random.Generator | None"], np.ndarray]
+
+
+def _rfft2(x: np.ndarray) -> np.ndarray:
+    """``numpy.fft.rfft2(x, axes=(0, 1))``, by :mod:`scipy.fft` with its lines on the worker threads.
+
+    Both run the same pocketfft transforms in the same order (``rfft`` of the last axis,
+    then ``fft`` of the first), so the bytes are NumPy's, on any number of threads (each
+    line is computed alone); SciPy's is faster (``tests/test_sparse.py``).
+    """
+    return sfft.rfft2(x, axes=(0, 1), workers=worker_count())
+
+
+def _irfft2(spectrum: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """``numpy.fft.irfft2(spectrum, s=shape, axes=(0, 1))`` by :mod:`scipy.fft`, one axis at a
+    time as NumPy does (each axis normalised by its own ``1/n``; SciPy's ``irfft2`` applies
+    ``1/(H W)`` at once, which rounds differently)."""
+    workers = worker_count()
+    rows = sfft.ifft(spectrum, n=shape[0], axis=0, workers=workers)
+    return sfft.irfft(rows, n=shape[1], axis=1, workers=workers)
 
 
 def upsample_bicubic(image: np.ndarray) -> np.ndarray:
@@ -398,7 +596,7 @@ def box_power(shape: tuple[int, int], tau: int) -> np.ndarray:
     """
     box = np.zeros(shape)
     box[:tau, :tau] = 1.0 / tau**2
-    return np.abs(np.fft.rfft2(box)) ** 2
+    return np.abs(_rfft2(box)) ** 2
 
 
 def lowpass_towards(u: np.ndarray, target: np.ndarray, weight: np.ndarray) -> np.ndarray:
@@ -415,9 +613,9 @@ def lowpass_towards(u: np.ndarray, target: np.ndarray, weight: np.ndarray) -> np
     weight : ndarray, shape (H, W // 2 + 1)
         Per-frequency weight in [0, 1] on the real-FFT grid.
     """
-    spec = np.fft.rfft2(u, axes=(0, 1))
-    spec += weight[..., None] * (np.fft.rfft2(target, axes=(0, 1)) - spec)
-    return np.fft.irfft2(spec, s=u.shape[:2], axes=(0, 1))
+    spec = _rfft2(u)
+    spec += weight[..., None] * (_rfft2(target) - spec)
+    return _irfft2(spec, u.shape[:2])
 
 
 class SpectrumProjector:
@@ -471,15 +669,17 @@ class SpectrumProjector:
         canvas[r0 : r0 + h, c0 : c0 + w] = spot * np.sqrt(big_h * big_w / (h * w))
         canvas += mean
         self.size = (big_h, big_w)
-        self.spectrum = np.fft.rfft2(canvas, axes=(0, 1))
+        self.spectrum = _rfft2(canvas)
         self.spectrum.flags.writeable = False
 
     def __call__(self, u: np.ndarray) -> np.ndarray:
-        spec = np.fft.rfft2(u, axes=(0, 1))
+        spec = _rfft2(u)
+        # np.conj inline: NumPy then multiplies into that temporary, and its vectorised
+        # complex product rounds differently with the operands swapped
         inner = np.sum(spec * np.conj(self.spectrum), axis=2)
         magnitude = np.abs(inner)
         phase = np.where(magnitude > 1e-300, inner / np.maximum(magnitude, 1e-300), 1.0)
-        return np.fft.irfft2(self.spectrum * phase[..., None], s=u.shape[:2], axes=(0, 1))
+        return _irfft2(self.spectrum * phase[..., None], u.shape[:2])
 
 
 def _reference_of(u: np.ndarray, reference) -> np.ndarray:
@@ -489,8 +689,8 @@ def _reference_of(u: np.ndarray, reference) -> np.ndarray:
 
 def _lowpass_apply(e: np.ndarray, power: np.ndarray) -> np.ndarray:
     """``h_bar * h * e`` per channel (periodic)."""
-    spec = np.fft.rfft2(e, axes=(0, 1)) * power[..., None]
-    return np.fft.irfft2(spec, s=e.shape[:2], axes=(0, 1))
+    spec = _rfft2(e) * power[..., None]
+    return _irfft2(spec, e.shape[:2])
 
 
 def image_update(
@@ -558,10 +758,8 @@ def image_energy(
     hist = np.sum((u - projector(u, None)) ** 2)
     low = 0.0
     if beta > 0:
-        filtered = np.fft.irfft2(
-            np.fft.rfft2(u - _reference_of(u, reference), axes=(0, 1)) * np.sqrt(box_power)[..., None],
-            s=u.shape[:2],
-            axes=(0, 1),
+        filtered = _irfft2(
+            _rfft2(u - _reference_of(u, reference)) * np.sqrt(box_power)[..., None], u.shape[:2]
         )
         low = np.sum(filtered**2)
     return float(data + alpha * hist + beta * low)

@@ -32,6 +32,11 @@ translation) the masses are ``2^l`` everywhere and the transform is the undecima
 transform along the flow lines. The inverse undoes the merges in reverse order, which gives
 two estimates of every pixel (as a source and as a group start); their mean is the adjoint,
 i.e. the ``tau_l`` reconstruction above.
+
+Why this module is long: the schedule of the merges (scan order, masses, factors) and the
+forward and inverse scans that replay it share the conventions above, and each scan comes
+as a block of interleaved images plus its threaded driver (issue 20); split apart, every
+part would have to restate them.
 """
 
 from __future__ import annotations
@@ -41,10 +46,15 @@ import math
 import numpy as np
 
 from ..ops.jit import jit, prange
+from ..ops.linalg import worker_count
 
 __all__ = ["GroupletTightFrame", "checked_associations", "grouplet_weights"]
 
 _SQRT2 = math.sqrt(2.0)
+
+#: updates (images x (L+1) x pixels) from which a transform runs its images on numba's
+#: threads, in one block of interleaved images per worker
+PARALLEL_UPDATES = 1 << 20
 
 
 def checked_associations(associations: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
@@ -151,75 +161,121 @@ def _schedule(targets, orders, masses):
 
 
 @jit()
-def _forward(image, src, dst, detail, share, low):
-    """Sequential in-place scan; returns the ``(L+1, N)`` coefficients and the number of updates.
+def _forward_block(images, src, dst, detail, share, low, scales, normalized, out, b0, b1):
+    """The sequential in-place scan of images ``b0 .. b1 - 1`` of ``(B, N)`` together, into ``out`` ``(L+1, B, N)``.
 
     Merge ``k`` of level ``l``: ``d_l(m) = detail (a(m) - r(p))``, ``r(p) += share (a(m) - r(p))``
-    (the mass-weighted average of the group and ``m``).
+    (the mass-weighted average of the group and ``m``). The images are interleaved (one row of
+    ``b1 - b0`` values per pixel), so each merge loads its pixels, target and factors once for
+    all of them; every value gets the arithmetic of the one-image scan in the same order, so
+    the same bytes (``tests/test_grouplet_frame.py``). With ``normalized`` each coefficient is
+    then divided by ``scales[l, m]``. Returns the updates per image.
     """
     levels, n = src.shape
-    out = np.empty((levels + 1, n))
-    a = image.copy()
+    nb = b1 - b0
+    a = np.empty((n, nb))
+    for m in range(n):
+        for b in range(nb):
+            a[m, b] = images[b0 + b, m]
+    r = np.empty((n, nb))
     count = 0
     for lv in range(levels):
-        r = a.copy()  # the residual, updated in place
+        r[:] = a  # the residual, updated in place
         for k in range(n):
             m = src[lv, k]
             p = dst[lv, k]
-            diff = a[m] - r[p]
-            out[lv, m] = detail[lv, k] * diff
-            r[p] += share[lv, k] * diff
+            f = detail[lv, k]
+            g = share[lv, k]
+            for b in range(nb):
+                diff = a[m, b] - r[p, b]
+                d = f * diff
+                out[lv, b0 + b, m] = d / scales[lv, m] if normalized else d
+                r[p, b] += g * diff
             count += 1
-        a = r
+        a, r = r, a
     for m in range(n):
-        out[levels, m] = low[m] * a[m]
+        for b in range(nb):
+            d = low[m] * a[m, b]
+            out[levels, b0 + b, m] = d / scales[levels, m] if normalized else d
         count += 1
-    return out, count
-
-
-@jit()
-def _inverse(coefficients, src, dst, detail, share, low):
-    """Undo the merges in reverse order; the mean of each pixel's two estimates is the adjoint."""
-    levels, n = src.shape
-    count = 0
-    r = np.empty(n)
-    for m in range(n):
-        r[m] = coefficients[levels, m] / low[m]
-        count += 1
-    for lv in range(levels - 1, -1, -1):
-        source = np.empty(n)
-        for k in range(n - 1, -1, -1):
-            m = src[lv, k]
-            p = dst[lv, k]
-            delta = coefficients[lv, m] / detail[lv, k]  # a(m) - r(p) before the merge
-            old = r[p] - share[lv, k] * delta
-            source[m] = old + delta
-            r[p] = old
-            count += 1
-        for m in range(n):
-            r[m] = 0.5 * (r[m] + source[m])
-    return r, count
+    return count
 
 
 @jit(parallel=True)
-def _forward_rows(images, src, dst, detail, share, low):
-    """:func:`_forward` of every row of ``images`` ``(B, N)``, rows in parallel: ``(L+1, B, N)``."""
+def _forward_rows(images, src, dst, detail, share, low, scales, normalized, n_blocks):
+    """The scan of every row of ``images`` ``(B, N)``: ``(L+1, B, N)``, in ``n_blocks``
+    blocks of interleaved images on numba's threads (:func:`_forward_block`)."""
     levels = src.shape[0]
-    out = np.empty((levels + 1, images.shape[0], images.shape[1]))
-    counts = np.zeros(images.shape[0], dtype=np.int64)
-    for i in prange(images.shape[0]):
-        coefficients, counts[i] = _forward(images[i], src, dst, detail, share, low)
-        out[:, i] = coefficients
+    rows = images.shape[0]
+    out = np.empty((levels + 1, rows, images.shape[1]))
+    counts = np.zeros(n_blocks, dtype=np.int64)
+    size = (rows + n_blocks - 1) // n_blocks
+    for c in prange(n_blocks):
+        b0 = min(rows, c * size)
+        b1 = min(rows, b0 + size)
+        if b1 > b0:
+            counts[c] = _forward_block(images, src, dst, detail, share, low, scales, normalized, out, b0, b1)
     return out, counts
 
 
+@jit()
+def _inverse_block(coefficients, src, dst, detail, share, low, scales, normalized, out, b0, b1):
+    """Undo the merges of images ``b0 .. b1 - 1`` of ``(L+1, B, N)`` coefficients in reverse
+    order, interleaved as in :func:`_forward_block`, into ``out`` ``(B, N)``; the mean of each
+    pixel's two estimates is the adjoint. With ``normalized`` each coefficient is first
+    multiplied by ``scales[l, m]``. Returns the updates per image."""
+    levels, n = src.shape
+    nb = b1 - b0
+    r = np.empty((n, nb))
+    count = 0
+    for m in range(n):
+        for b in range(nb):
+            c = coefficients[levels, b0 + b, m]
+            if normalized:
+                c = c * scales[levels, m]
+            r[m, b] = c / low[m]
+        count += 1
+    source = np.empty((n, nb))
+    for lv in range(levels - 1, -1, -1):
+        for k in range(n - 1, -1, -1):
+            m = src[lv, k]
+            p = dst[lv, k]
+            f = detail[lv, k]
+            g = share[lv, k]
+            s = scales[lv, m]
+            for b in range(nb):
+                c = coefficients[lv, b0 + b, m]
+                if normalized:
+                    c = c * s
+                delta = c / f  # a(m) - r(p) before the merge
+                old = r[p, b] - g * delta
+                source[m, b] = old + delta
+                r[p, b] = old
+            count += 1
+        for m in range(n):
+            for b in range(nb):
+                r[m, b] = 0.5 * (r[m, b] + source[m, b])
+    for m in range(n):
+        for b in range(nb):
+            out[b0 + b, m] = r[m, b]
+    return count
+
+
 @jit(parallel=True)
-def _inverse_rows(coefficients, src, dst, detail, share, low):
-    """:func:`_inverse` of every row of ``(L+1, B, N)`` coefficients, rows in parallel: ``(B, N)``."""
-    out = np.empty((coefficients.shape[1], coefficients.shape[2]))
-    counts = np.zeros(coefficients.shape[1], dtype=np.int64)
-    for i in prange(coefficients.shape[1]):
-        out[i], counts[i] = _inverse(np.ascontiguousarray(coefficients[:, i]), src, dst, detail, share, low)
+def _inverse_rows(coefficients, src, dst, detail, share, low, scales, normalized, n_blocks):
+    """The inverse of every image of ``(L+1, B, N)`` coefficients: ``(B, N)``, in blocks
+    of interleaved images on numba's threads (:func:`_inverse_block`)."""
+    rows = coefficients.shape[1]
+    out = np.empty((rows, coefficients.shape[2]))
+    counts = np.zeros(n_blocks, dtype=np.int64)
+    size = (rows + n_blocks - 1) // n_blocks
+    for c in prange(n_blocks):
+        b0 = min(rows, c * size)
+        b1 = min(rows, b0 + size)
+        if b1 > b0:
+            counts[c] = _inverse_block(
+                coefficients, src, dst, detail, share, low, scales, normalized, out, b0, b1
+            )
     return out, counts
 
 
@@ -293,19 +349,36 @@ class GroupletTightFrame:
         self.scales = factors / line[:, None]
         self.last_count = 0
 
-    def forward(self, image: np.ndarray) -> np.ndarray:
-        """Coefficients ``d_l(m)``, shape ``(L+1, *batch, H, W)``, of images ``(*batch, H, W)``; layer ``L`` is ``d_L``."""
+    def forward(self, image: np.ndarray, *, scales: np.ndarray | None = None) -> np.ndarray:
+        """Coefficients ``d_l(m)``, shape ``(L+1, *batch, H, W)``, of images ``(*batch, H, W)``; layer ``L`` is ``d_L``.
+
+        ``scales`` ``(L+1, H, W)``: return ``d_l(m) / scales[l, m]`` instead (the same bytes
+        as dividing afterwards, without another pass over the coefficients).
+        """
         x = np.asarray(image, dtype=np.float64)
         if x.shape[-2:] != self.shape:
             raise ValueError(f"image shape {x.shape[-2:]} does not match {self.shape}")
         batch = x.shape[:-2]
         flat = np.ascontiguousarray(x.reshape((-1, self.shape[0] * self.shape[1])))
-        out, counts = _forward_rows(flat, self.orders, *self._merges)
-        self.last_count = int(counts[0]) if counts.size else 0
+        factors, normalized = self._scales_of(scales)
+        blocks = self._blocks(flat.shape[0])
+        if blocks > 1:
+            out, counts = _forward_rows(flat, self.orders, *self._merges, factors, normalized, blocks)
+            self.last_count = int(counts[0])
+        else:
+            out = np.empty((self.levels + 1,) + flat.shape)
+            count = _forward_block(
+                flat, self.orders, *self._merges, factors, normalized, out, 0, flat.shape[0]
+            )
+            self.last_count = int(count) if flat.shape[0] else 0
         return out.reshape((self.levels + 1,) + batch + self.shape)
 
-    def inverse(self, coefficients: np.ndarray) -> np.ndarray:
-        """Images ``(*batch, H, W)`` from ``(L+1, *batch, H, W)``: ``f = sum_l tau_l sum_m d_l(m) b_{l,m}``."""
+    def inverse(self, coefficients: np.ndarray, *, scales: np.ndarray | None = None) -> np.ndarray:
+        """Images ``(*batch, H, W)`` from ``(L+1, *batch, H, W)``: ``f = sum_l tau_l sum_m d_l(m) b_{l,m}``.
+
+        ``scales`` ``(L+1, H, W)``: the coefficients are ``d_l(m) / scales[l, m]`` (the
+        inverse of :meth:`forward` with the same ``scales``); each is multiplied back first.
+        """
         c = np.asarray(coefficients, dtype=np.float64)
         if c.shape[0] != self.levels + 1 or c.shape[-2:] != self.shape:
             raise ValueError(
@@ -313,9 +386,33 @@ class GroupletTightFrame:
             )
         batch = c.shape[1:-2]
         flat = np.ascontiguousarray(c.reshape((self.levels + 1, -1, self.shape[0] * self.shape[1])))
-        out, counts = _inverse_rows(flat, self.orders, *self._merges)
-        self.last_count = int(counts[0]) if counts.size else 0
+        factors, normalized = self._scales_of(scales)
+        blocks = self._blocks(flat.shape[1])
+        if blocks > 1:
+            out, counts = _inverse_rows(flat, self.orders, *self._merges, factors, normalized, blocks)
+            self.last_count = int(counts[0])
+        else:
+            out = np.empty(flat.shape[1:])
+            count = _inverse_block(
+                flat, self.orders, *self._merges, factors, normalized, out, 0, flat.shape[1]
+            )
+            self.last_count = int(count) if flat.shape[1] else 0
         return out.reshape(batch + self.shape)
+
+    def _scales_of(self, scales: np.ndarray | None) -> tuple[np.ndarray, bool]:
+        """``scales`` as contiguous ``(L+1, N)`` factors, and whether there are any."""
+        if scales is None:
+            return np.ones((1, 1)), False
+        factors = np.ascontiguousarray(scales, dtype=np.float64).reshape(self.levels + 1, -1)
+        if factors.shape[1] != self.shape[0] * self.shape[1]:
+            raise ValueError(f"scales must have shape ({self.levels + 1}, {self.shape[0]}, {self.shape[1]})")
+        return factors, True
+
+    def _blocks(self, images: int) -> int:
+        """Blocks of interleaved images run on numba's threads: one per worker for large
+        stacks; one block (the calling thread) when starting threads costs more than it saves."""
+        work = images * (self.levels + 1) * self.shape[0] * self.shape[1]
+        return min(worker_count(), images) if work >= PARALLEL_UPDATES else 1
 
     def energy(self, coefficients: np.ndarray) -> float:
         """Weighted energy ``sum_l tau_l sum_m d_l(m)^2`` (equals ``||f||^2`` for ``d = forward(f)``)."""

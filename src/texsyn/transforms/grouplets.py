@@ -169,18 +169,17 @@ class WaveletGroupletTransform:
         planes = x[None] if x.ndim == 2 else np.moveaxis(x, -1, 0)  # (C, H, W)
         bands = self.pyramid.forward_planes(planes)  # (J+1, C, H, W)
         flat = bands.reshape((bands.shape[0] * bands.shape[1],) + self.shape)
-        coefficients = self.grouplets.forward(flat)
-        if self.normalized:
-            coefficients /= self._scales[:, None]
+        coefficients = self.grouplets.forward(flat, scales=self._scales if self.normalized else None)
         return coefficients.reshape((-1,) + bands.shape)
 
     def synthesise(self, coefficients: np.ndarray) -> np.ndarray:
         """Image ``(H, W, C)`` from coefficients in :meth:`analyse`'s layout (the pseudo-inverse)."""
         c = np.asarray(coefficients, dtype=np.float64)
         levels, bands, channels = c.shape[:3]
-        if self.normalized:
-            c = c * self._scales[:, None, None]
-        planes = self.grouplets.inverse(c.reshape((levels, bands * channels) + self.shape))
+        planes = self.grouplets.inverse(
+            c.reshape((levels, bands * channels) + self.shape),
+            scales=self._scales if self.normalized else None,
+        )
         image = self.pyramid.inverse_planes(planes.reshape((bands, channels) + self.shape))
         return np.moveaxis(image, 0, -1)
 
