@@ -145,7 +145,10 @@ def test_commit_flushes_its_outputs_and_the_folder_not_the_folders_other_files(t
     real = os.fsync
     monkeypatch.setattr(os, "fsync", lambda fd: calls.append(fd) or real(fd))
     outputs = OutputSet()
-    image, side = outputs.claim(tmp_path / "o.png"), outputs.claim(tmp_path / "o.png.json", formats=JSON_FORMATS)
+    image, side = (
+        outputs.claim(tmp_path / "o.png"),
+        outputs.claim(tmp_path / "o.png.json", formats=JSON_FORMATS),
+    )
     with outputs:
         outputs.write_image(image, np.zeros((4, 4)))
         outputs.write_text(side, "{}")
