@@ -260,7 +260,7 @@ def grow_pixels(
     Vectorised without changing the result: a pixel's template depends only on pixels
     within ``r = w // 2`` of it, so each pass is split into batches of pixels that do not
     interact (:func:`~texsyn.ops.nonparametric.schedule_batches`), searched together: this is
-    exactly the sequential order of the pass (``docs/methods/efros_leung.md``, "Speed"). A
+    exactly the sequential order of the pass (``docs/methods/efros_leung.md``, "Performance"). A
     :class:`~texsyn.ops.kcoherence.CoherentWindows` sampler (the approximate search) fills
     the pixels one by one in a compiled loop instead.
 
