@@ -385,7 +385,9 @@ class _ExactPass:
     def __init__(self, sampler: NonParametricSampler, canvas: _Canvas, background, max_batch: int):
         self.sampler, self.canvas, self.background = sampler, canvas, background
         self.batch_cap = int(max(8, min(max_batch, (1 << 23) // max(sampler.n_windows, 1))))
-        self.screen_rows = max(self.batch_cap, (1 << 23) // max(sampler.n_windows, 1))
+        # small chunks: the matching waits only for a pass's first one, and later ones are
+        # computed from a more recent state (tighter bounds)
+        self.screen_rows = max(128, (1 << 21) // max(sampler.n_windows, 1))
         self.screened = sampler.screens
 
     def __call__(self, rows, cols, uniforms, tolerance: float, threshold: float) -> int:
