@@ -176,4 +176,6 @@ def test_approximate_search_chooses_exact_candidates_mostly(colour_exemplar):
     assert len(records) == 40 * 40 - 9
     assert inside >= 0.7
     assert np.mean(chosen - best) <= 1.0e-3
+    alone, _, _ = _approximate_search_error(colour_exemplar, 7, (40, 40), k=0)
+    assert np.mean(alone[:, 0] <= alone[:, 1] * 1.1 + 1e-10) < inside - 0.2  # the similar windows matter
     np.testing.assert_array_equal(values, colour_exemplar[source[..., 0], source[..., 1]])

@@ -341,7 +341,7 @@ def grow_pixels(
     Vectorised without changing the result: a pixel's template depends only on pixels
     within ``r = w // 2`` of it, so each pass is split into batches of pixels that do not
     interact (:func:`~texsyn.ops.nonparametric.schedule_batches`), searched together: this is
-    exactly the sequential order of the pass (``docs/methods/efros_leung.md``, "Speed"). A
+    exactly the sequential order of the pass (``docs/methods/efros_leung.md``, "Performance"). A
     :class:`~texsyn.ops.kcoherence.CoherentWindows` sampler (the approximate search) fills
     the pixels one by one in a compiled loop instead.
 
@@ -466,7 +466,9 @@ class _ExactPass:
     def __init__(self, sampler: NonParametricSampler, canvas: _Canvas, background, max_batch: int):
         self.sampler, self.canvas, self.background = sampler, canvas, background
         self.batch_cap = int(max(8, min(max_batch, (1 << 23) // max(sampler.n_windows, 1))))
-        self.screen_rows = max(self.batch_cap, (1 << 23) // max(sampler.n_windows, 1))
+        # small chunks: the matching waits only for a pass's first one, and later ones are
+        # computed from a more recent state (tighter bounds)
+        self.screen_rows = max(128, (1 << 21) // max(sampler.n_windows, 1))
         self.screened = sampler.screens
 
     def __call__(self, rows, cols, uniforms, tolerance: float, threshold: float) -> int:

@@ -98,7 +98,7 @@ def nonparametric_bytes(
     transient is that of its construction (patch extraction and the squares); otherwise that
     of growing a texture of that size: the padded canvas, its masks, one batch of searches,
     whose size is bounded by the length of the growing front, and two chunks of float32 lower
-    bounds (``2 x 4 K`` bytes a row, ``max(256, 2^23 / K)`` rows or a front, whichever is
+    bounds (``2 x 4 K`` bytes a row, ``max(128, 2^21 / K)`` rows or about a pass, whichever is
     shorter; ``docs/methods/efros_leung.md``).
     """
     k = float(max(1, (h - window + 1) * (w - window + 1)))
@@ -116,7 +116,7 @@ def nonparametric_bytes(
     batch = float(min(cap, max(8, (oh + ow) // (r + 1))))
     grow = padded * (8.0 * c + 33.0) + 16.0 * float(oh) * float(ow) + 64.0 * (oh + ow + 8 * r)
     grow += batch * (48.0 * dim + 16.0 * k + 24.0 * window * window)
-    chunk = float(min(max(cap, (1 << 23) // int(k)), 2 * (oh + ow)))  # at most a growing front
+    chunk = float(min(max(128, (1 << 21) // int(k)), oh + ow))  # at most about a pass
     grow += 2.0 * chunk * (4.0 * k + 16.0 * screen + 8.0 * dim) + 24.0 * k
     return kept, grow
 

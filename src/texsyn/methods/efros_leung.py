@@ -32,7 +32,7 @@ class EfrosLeung(TextureSynthesizer):
 
     The search is exhaustive and exact: float32 lower bounds in matrix products, then exact
     distances of the windows that could be candidates, with the bytes of the plain float64
-    search (``docs/methods/efros_leung.md``, "Speed"). ``search='approximate'`` compares
+    search (``docs/methods/efros_leung.md``, "Performance"). ``search='approximate'`` compares
     each pixel with a few dozen k-coherent windows only ("Approximate search" there).
 
     Parameters
@@ -51,8 +51,8 @@ class EfrosLeung(TextureSynthesizer):
         ``'exact'``: every exemplar window is compared (the paper). ``'approximate'``: only
         the windows continuing the sources of the pixel's filled 8-neighbours (Ashikhmin
         2001) and their ``k_coherence`` most similar windows (Tong et al. 2002), with exact
-        distances; about 10 times faster, its choices measured against the exact search in
-        the docs.
+        distances: 0.24 s instead of about 5 s of CPU for 128 -> 256 colour; about four
+        choices in five are ones the exact search could make (measured in the docs).
     k_coherence : int
         Similar windows per continuation in the approximate search (ranked on the
         exemplar's 8 principal axes of Gaussian-weighted windows); unused by ``'exact'``.

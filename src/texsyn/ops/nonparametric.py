@@ -199,7 +199,7 @@ class NonParametricSampler:
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`match` and its acceptance ``error <= accept``, from the lower bounds of ``screen``.
 
-        The same choice as :meth:`match` (``docs/methods/efros_leung.md``, "Speed"): every
+        The same choice as :meth:`match` (``docs/methods/efros_leung.md``, "Performance"): every
         window that could be a candidate of :meth:`match` survives the float32 screen and
         gets its exact float64 distance; where the rounding of :meth:`match`'s matrix
         product could put a survivor on the other side of the threshold (a distance within

@@ -7,7 +7,7 @@ many windows to every exemplar window; :meth:`ScreenBank.choose` finds the windo
 could be candidates of Efros and Leung's rule, computes their exact distances and applies the
 rule, and says where the result could differ from the float64 matrix product of
 :meth:`~texsyn.ops.nonparametric.NonParametricSampler.match` (the sampler then uses that).
-``docs/methods/efros_leung.md``, "Speed", gives the bounds and why the bytes are those of the
+``docs/methods/efros_leung.md``, "Performance", gives the bounds and why the bytes are those of the
 matrix product.
 
 Why this module is long: the lower bound, the two rounding allowances (float32 products
@@ -29,7 +29,7 @@ __all__ = ["ScreenBank", "WindowScreen", "window_ssd"]
 _U32 = 2.0**-24
 _U64 = 2.0**-53
 #: radius (in pixels, Euclidean) of the central disc of the window whose known pixels give
-#: the float32 lower bound of the exact search (``docs/methods/efros_leung.md``, "Speed")
+#: the float32 lower bound of the exact search (``docs/methods/efros_leung.md``, "Performance")
 SCREEN_RADIUS = 4.0
 #: principal colour axes of the exemplar on which the float32 lower bound is computed
 SCREEN_CHANNELS = 2
