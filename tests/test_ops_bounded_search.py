@@ -60,3 +60,54 @@ def test_nearest_rows_bounded_is_nearest_rows():
             )
         ties = bank[4046:4056]  # rows with an identical twin: answered by nearest_rows itself
         assert np.array_equal(nearest_rows_bounded(ties, bank, norms, index), nearest_rows(ties, bank, norms))
+
+
+def _exemplar(size=64):
+    import texsyn
+
+    return np.stack([texsyn.data.exemplar(n, size=size) for n in ("grass", "gravel", "brick")], -1)
+
+
+@pytest.mark.parametrize("workers", [1, 3])
+def test_wei_levoy_proven_search_gives_the_plain_search_bytes(monkeypatch, workers):
+    import texsyn
+    import texsyn.methods.wei_levoy as wl
+    import texsyn.ops.search as search
+
+    ex = _exemplar()
+    params = {"levels": 2, "window": 5, "parent_window": 3}
+    fast = texsyn.make_method("wei_levoy", **params).fit(ex)
+    assert fast.indexes_[0] is not None  # 64 x 64 = 4096 rows: the proven search is used
+    monkeypatch.setattr(search, "worker_count", lambda: workers)  # parts of the bank per query
+    got = fast.sample_with_map((72, 80), rng=3)
+    monkeypatch.setattr(wl, "BOUNDED_SEARCH_ROWS", 10**9)
+    plain = texsyn.make_method("wei_levoy", **params).fit(ex)
+    assert plain.indexes_[0] is None
+    want = plain.sample_with_map((72, 80), rng=3)
+    assert np.array_equal(got.image, want.image) and np.array_equal(got.source_map, want.source_map)
+
+
+def test_patch_wavelet_fast_search_gives_the_index_bytes(monkeypatch):
+    import texsyn
+    import texsyn.models.patch_wavelet as pwm
+
+    ex = _exemplar()
+    fast = texsyn.make_method("patch_wavelet").fit(ex)
+    assert 8 in fast.transform_.fast
+    got = fast.sample_with_map((128, 128), rng=5)
+    monkeypatch.setattr(pwm, "FAST_SEARCH_POSITIONS", 10**9)
+    plain = texsyn.make_method("patch_wavelet").fit(ex)
+    assert not plain.transform_.fast
+    want = plain.sample_with_map((128, 128), rng=5)
+    assert np.array_equal(got.image, want.image) and np.array_equal(got.source_map, want.source_map)
+    # the pairs the fast search cannot prove go to the index, and give its answers
+    t = fast.transform_
+    rng = np.random.default_rng(0)
+    first = np.stack([rng.integers(0, 64, 300), rng.integers(0, 64, 300)], axis=1)
+    second = (first + rng.integers(-3, 4, (300, 2))) % 64
+    rows = np.arange(300)
+    answers = t._nearest_rows(
+        lambda k: t.windows.mean_descriptors(first[k], second[k], 1, 2, 8), rows, 300, 8
+    )
+    assert np.array_equal(answers, plain.transform_.mean_features(first, second, 1, 2, 8))
+    assert np.array_equal(t.mean_features(first, second, 1, 2, 8), answers)

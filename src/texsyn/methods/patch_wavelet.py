@@ -34,12 +34,13 @@ import numpy as np
 from .._validation import OneOf, Range, as_exemplar
 from ..drivers.coarse_to_fine import coarse_to_fine
 from ..errors import InputError
-from ..models.patch_wavelet import PatchWaveletTransform
+from ..models.patch_wavelet import FAST_SEARCH_DIMENSION, FAST_SEARCH_POSITIONS, PatchWaveletTransform
 from ..ops import as_channels, match_histogram
 from ..ops.canvas import crop_to_output, extend_to_canvas, power_of_two_canvas
 from ..ops.color import colour_space
 from ..ops.linalg import fixed_order
 from ..ops.progress import Reporter
+from ..ops.search import bounded_index_bytes
 from ..transforms.patch_wavelet import (
     PatchWaveletCoefficients,
     descriptor_dimension,
@@ -412,6 +413,14 @@ class PatchWavelet(TextureSynthesizer):
         transient = 16.0 * k * dim + 8.0 * n * dim + (24.0 * n * n if n <= 512 else 64.0 * n * neighbours)
         return k * (16.0 * self.embedding_dim + 32.0), transient + 8.0 * k * (neighbours + dim)
 
+    def _fast_widths(self, exemplar_shape) -> dict[int, int]:
+        """Widths (and descriptor lengths) that get a proven fast search next to their index."""
+        h, w, _ = shape_dims(exemplar_shape)
+        if h * w < FAST_SEARCH_POSITIONS:
+            return {}
+        dims = self._width_dims(exemplar_shape)
+        return {v: d for v, d in dims.items() if v <= self.max_resolution and d <= FAST_SEARCH_DIMENSION}
+
     def _model_terms(self, exemplar_shape) -> dict[str, float]:
         """What a fitted transform holds: float32 indexes, extended exemplar, block means, embeddings."""
         h, w, c = shape_dims(exemplar_shape)
@@ -422,6 +431,11 @@ class PatchWavelet(TextureSynthesizer):
             "patch indexes": sum(4.0 * k * d + 4.0 * k for d in dims.values()),
             "extended exemplar and block means": 32.0 * k * c * (1 + block_means) + 8.0 * k * c,
         }
+        fast = self._fast_widths(exemplar_shape)
+        if fast:  # float64 descriptors, their bounded index and isolation flags
+            terms["fast searches"] = sum(
+                8.0 * k * d + bounded_index_bytes(k, d)[0] + k for d in fast.values()
+            )
         noisy = self._noisy_widths(exemplar_shape)
         if noisy:
             terms["embeddings"] = sum(self._embedding_bytes(k, dims[width])[0] for width in noisy)
@@ -433,18 +447,27 @@ class PatchWavelet(TextureSynthesizer):
         k = float(h * w)
         dims = self._width_dims(exemplar_shape)
         out = max(20.0 * k * d + 16.0 * k * math.sqrt(d) + 16.0 * k for d in dims.values())
+        fast = self._fast_widths(exemplar_shape).values()
+        out = max([out] + [8.0 * k * d + bounded_index_bytes(k, d)[1] for d in fast])
         return max(
             [out] + [self._embedding_bytes(k, dims[width])[1] for width in self._noisy_widths(exemplar_shape)]
         )
 
-    def _query_bytes(self, n_queries: float, dim: int, k: float, *, glued: bool) -> float:
-        """Transient of one chunk of nearest-patch queries (descriptors, products, re-ranking)."""
+    def _query_bytes(self, n_queries: float, dim: int, k: float, *, glued: bool, fast: bool = False) -> float:
+        """Transient of one chunk of nearest-patch queries (descriptors, products, re-ranking).
+
+        With ``fast`` (a width with a proven fast search), the index sees the queries the
+        fast search could not prove, one tile of rows at a time, and the fast search itself
+        holds a tile of float32 products per worker.
+        """
         chunk = min(n_queries, max(1, 2**22 // dim))
-        block = min(chunk, 1024)
+        block = min(chunk, 256 if fast else 1024)
         make = (16.0 if glued else 8.0) * chunk * dim
         # a block's products are still referenced while the next block's are computed
-        grams = 2.0 if chunk > block else 1.0
+        grams = 2.0 if chunk > block and not fast else 1.0
         search = 4.0 * grams * block * k + max(12.0 * block * dim, 16.0 * block * self.candidates * dim)
+        if fast:
+            search = max(search, 8.0 * 256 * 2048 + 64.0 * 256 * dim)
         return max(make, 8.0 * chunk * dim + search) + 48.0 * chunk
 
     def _transform_query_bytes(self, grid: float, levels: int, exemplar_shape) -> float:
@@ -452,12 +475,14 @@ class PatchWavelet(TextureSynthesizer):
         most ``grid / 2^(2j - 1)`` samples with windows of ``clamp(2^j, min_width, W_max)``."""
         h, w, _ = shape_dims(exemplar_shape)
         dims = self._width_dims(exemplar_shape)
+        fast = self._fast_widths(exemplar_shape)
         return max(
             self._query_bytes(
                 max(1.0, grid / 2 ** (2 * j - 1)),
                 dims[self._level_width(exemplar_shape, j)],
                 float(h * w),
                 glued=True,
+                fast=self._level_width(exemplar_shape, j) in fast,
             )
             for j in range(1, levels + 1)
         )

@@ -43,7 +43,13 @@ from ..drivers.coarse_to_fine import coarse_to_fine
 from ..errors import InputError
 from ..ops.patches import as_channels
 from ..ops.progress import Reporter
-from ..ops.search import BoundedNearestIndex, nearest_rows, nearest_rows_bounded
+from ..ops.search import (
+    BoundedNearestIndex,
+    bounded_index_bytes,
+    nearest_rows,
+    nearest_rows_band,
+    nearest_rows_bounded,
+)
 from ..ops.tsvq import TSVQ
 from ..transforms.pyramids import gaussian_pyramid
 from ..transforms.steerable import pyramid_sizes
@@ -160,8 +166,14 @@ class WeiLevoy(TextureSynthesizer):
             build = max(20.0 * k * dim, 24.0 * k * widest + 8.0 * k * widest * c)
             if self.search == "tsvq":
                 build = max(build, 40.0 * k * dim)
+            bounded = self.search == "exact" and k >= BOUNDED_SEARCH_ROWS
+            if bounded:  # the proven search's index, built next to the bank
+                index_kept, index_build = bounded_index_bytes(k, dim)
+                build = max(build, index_build)
             peak = max(peak, kept + 8.0 * k * dim + build)
             kept += 8.0 * k * dim + 8.0 * k
+            if bounded:
+                kept += index_kept + k
             if self.search == "tsvq":
                 kept += 16.0 * k * dim / max(1, self.leaf_size) + 16.0 * k
         terms = {"exemplar pyramid and neighbourhood banks": kept}
@@ -190,7 +202,7 @@ class WeiLevoy(TextureSynthesizer):
         self.causal_ = causal_offsets(self.window)
         self.parent_ = square_offsets(self.parent_window)
         rng = np.random.default_rng(self.fit_rng)
-        self.banks_, self.norms_, self.trees_, self.indexes_ = [], [], [], []
+        self.banks_, self.norms_, self.trees_, self.indexes_, self.isolated_ = [], [], [], [], []
         for level, image in enumerate(self.pyramid_):
             rows, cols = np.divmod(np.arange(image.shape[0] * image.shape[1]), image.shape[1])
             parts = [_gather(image, rows, cols, self.causal_)]
@@ -200,8 +212,14 @@ class WeiLevoy(TextureSynthesizer):
             self.banks_.append(bank)
             self.norms_.append(np.sum(bank * bank, axis=1))
             self.trees_.append(TSVQ(bank, self.leaf_size, rng) if self.search == "tsvq" else None)
-            bounded = self.search == "exact" and len(bank) >= BOUNDED_SEARCH_ROWS
-            self.indexes_.append(BoundedNearestIndex(bank) if bounded else None)
+            index = None
+            if self.search == "exact" and len(bank) >= BOUNDED_SEARCH_ROWS:
+                index = BoundedNearestIndex(bank)
+                # rows that no other row comes near: a query equal to one needs no search
+                isolated = index.isolated(nearest_rows_band(bank, index.norm_max))
+                isolated.setflags(write=False)
+            self.indexes_.append(index)
+            self.isolated_.append(isolated if index is not None else None)
 
     def _sample(self, shape, rng, callback):
         """Step 2: the output pyramid, coarse to fine; the finest level and its sources."""
@@ -265,7 +283,7 @@ class WeiLevoy(TextureSynthesizer):
         src = start.reshape(h, w)  # every pixel's source is overwritten when it is synthesised
         eh, ew = ex.shape[:2]
         bank, norms, tree = self.banks_[level], self.norms_[level], self.trees_[level]
-        index = self.indexes_[level]
+        index, isolated = self.indexes_[level], self.isolated_[level]
         slope = self.window // 2 + 1
         ys_all = np.arange(h)
         for t in range(w + slope * (h - 1)):
@@ -282,7 +300,7 @@ class WeiLevoy(TextureSynthesizer):
             elif index is not None:  # seeds: the continuations of the left and upper sources
                 left, up = src[ys, xs - 1], src[ys - 1, xs]
                 seeds = np.stack([left - left % ew + (left + 1) % ew, (up + ew) % (eh * ew)], axis=1)
-                best = nearest_rows_bounded(q, bank, norms, index, seeds)
+                best = nearest_rows_bounded(q, bank, norms, index, seeds, isolated)
             else:
                 best = nearest_rows(q, bank, norms)
             out[ys, xs] = flat_ex[best]

@@ -127,9 +127,9 @@ class _FastSearch:
     When at most ``candidates`` windows lie within ``band`` (the nearest is then among the
     re-ranked ones) and only one within ``3 gamma_{D+2} x`` (no other can win the re-ranking),
     the nearest window is the index's answer: :class:`~texsyn.ops.search.BoundedNearestIndex`
-    finds it and proves both counts. ``isolated[k]`` holds that proof for a query equal to
-    the window of position ``k`` itself (no search needed), which is what the association
-    field's mean of two coherent features is.
+    finds it and proves both counts. ``isolated[k]``, no other window within ``band(0)`` of
+    the window of position ``k``, is that proof for a query equal to that window (no search
+    needed), which is what the association field's mean of two coherent features is.
 
     Parameters
     ----------
@@ -144,9 +144,8 @@ class _FastSearch:
         self.mean = index.mean
         self.search = BoundedNearestIndex(bank)
         self.centred_max = float(np.sqrt(np.max(np.einsum("kd,kd->k", bank - self.mean, bank - self.mean))))
-        k = bank.shape[0]
-        best, counts = self.query(bank, np.arange(k)[:, None])
-        self.isolated = _read_only((best == np.arange(k)) & self.proven(counts))
+        # no other window within the ranking band of a window itself (x = 0: the band's constant)
+        self.isolated = _read_only(self.search.isolated(self.bands(bank)[:, 0, 2]))
 
     def bands(self, queries: np.ndarray) -> np.ndarray:
         """``(Q, 2, 3)``: the float32 ranking band and the float64 tie band of every query."""
@@ -560,8 +559,8 @@ class PatchWaveletTransform(_Immutable, PatchLifting):
         :data:`~texsyn.ops.linalg.BLOCK_ROWS` rows. A query alone in its tile had a
         single-row product; the others had several rows, and a row's products do not depend
         on the other rows (:func:`_rows_independent`, checked when the fast path was built).
-        So the lone ones are asked alone again and the others together, in a batch that
-        leaves no tile with a single row.
+        So the lone ones are asked alone again and the others together, in batches of one
+        tile (a batch of one row gets a copy of it, so that no tile has a single row).
         """
         index = self.index(width)
         chunk = max(1, 2**22 // max(1, self.windows.dimension(width)))
@@ -575,8 +574,8 @@ class PatchWaveletTransform(_Immutable, PatchLifting):
         for k in np.flatnonzero(alone):
             out[k] = index.query(queries_at(rows[k : k + 1]))[0][0]
         together = np.flatnonzero(~alone)
-        for start in range(0, together.size, chunk):
-            k = together[start : start + chunk]
+        for start in range(0, together.size, BLOCK_ROWS):
+            k = together[start : start + BLOCK_ROWS]
             queries = queries_at(rows[k])
             if queries.shape[0] % BLOCK_ROWS == 1:  # no single-row tile: repeat the last query
                 queries = np.concatenate([queries, queries[-1:]])

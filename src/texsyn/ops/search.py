@@ -39,7 +39,9 @@ __all__ = [
     "WeightedPatchBank",
     "knn_patches",
     "nearest_both_ways",
+    "bounded_index_bytes",
     "nearest_rows",
+    "nearest_rows_band",
     "nearest_rows_bounded",
 ]
 
@@ -488,11 +490,11 @@ def _fold_max(maxima, values, n):
 
 
 @jit(nogil=True)
-def _bounded_seeds(queries, bank, seeds, lo, hi, gamma_x, best_j, best_x, upper, keep_j, keep_x, kept):
-    """Start a part of a :class:`BoundedNearestIndex` search from the seeds (``-1``: none).
+def _bounded_seeds(queries, bank, seeds, gamma_x, best_j, best_x, upper, keep_j, keep_x, kept):
+    """Start a :class:`BoundedNearestIndex` search from the seeds (``-1``: none).
 
-    Every distinct seed's exact distance bounds the smallest distance from above; the seeds
-    in the part's rows ``lo .. hi - 1`` are its first kept rows.
+    Every distinct seed's exact distance bounds the smallest distance from above, and the
+    seeds are the first kept rows.
     """
     m, n_seeds = seeds.shape
     for i in range(m):
@@ -509,13 +511,12 @@ def _bounded_seeds(queries, bank, seeds, lo, hi, gamma_x, best_j, best_x, upper,
             x = _squared_distance(queries[i], bank[j])
             if x * (1.0 + gamma_x) < upper[i]:
                 upper[i] = x * (1.0 + gamma_x)
-            if lo <= j < hi:
-                keep_j[i, n] = j
-                keep_x[i, n] = x
-                n += 1
-                if x < bx or (x == bx and j < bj):
-                    bx = x
-                    bj = j
+            keep_j[i, n] = j
+            keep_x[i, n] = x
+            n += 1
+            if x < bx or (x == bx and j < bj):
+                bx = x
+                bj = j
         best_j[i] = bj
         best_x[i] = bx
         kept[i] = n
@@ -524,7 +525,8 @@ def _bounded_seeds(queries, bank, seeds, lo, hi, gamma_x, best_j, best_x, upper,
 @jit(nogil=True)
 def _bounded_chunk(
     gram, lo, queries, bank, seeds, q_sq, q_err, l_err, q_res, q_res_err, q_ext, q_res2, q_res2_err,
-    records, b_err_max, sigma, gamma_x, gamma_e, band, best_j, best_x, upper, keep_j, keep_x, kept,
+    b_res, b_res2, b_ext, b_errors, sigma, gamma_x, gamma_e, band, best_j, best_x, upper, keep_j,
+    keep_x, kept,
     overflow,
 ):  # fmt: skip
     """Search the bank rows ``lo, lo + 1, ...`` of one chunk (see :class:`BoundedNearestIndex`).
@@ -540,10 +542,11 @@ def _bounded_chunk(
     residual parts, every rounding error included); the rows that pass get a second bound
     from the next coordinates (``q_ext`` and the bank's, float32 values compared directly)
     and the residual beyond them, and the rows that pass both get their exact distance,
-    which tightens the bound. ``records[j]`` holds what the bounds need of bank row ``j``,
-    side by side: its projection error bound, residual norm and its error bound, residual
-    norm beyond the next coordinates and its error bound, then the next coordinates. The
-    state carried from chunk to chunk, per query: the best row and
+    which tightens the bound. Of bank row ``j`` the bounds read its residual norms
+    ``b_res[j]`` (beyond the projection) and ``b_res2[j]`` (beyond the next coordinates)
+    and the next coordinates ``b_ext[j]``; ``b_errors`` holds the largest error bounds of the
+    bank's projections and of its two residual norms (small arrays, read from the cache).
+    The state carried from chunk to chunk, per query: the best row and
     its distance, the bound, the rows kept (every row whose distance may lie within
     ``band(i, x) = band[i, 0] x + band[i, 1] sqrt(x) + band[i, 2]`` of the smallest ``x`` is
     among them) and whether more than ``keep_j.shape[1]``
@@ -588,7 +591,7 @@ def _bounded_chunk(
                 bj = j0
         # a row can pass only if sqrt(L - l_err) - q_err - b_err_max <= sigma sqrt(upper + band)
         bound = upper[i] + _band(band[i], upper[i])
-        reach = sigma * np.sqrt(bound) + q_err[i] + b_err_max
+        reach = sigma * np.sqrt(bound) + q_err[i] + b_errors[0]
         limit = 0.5 * (reach * reach + l_err[i] - q_sq[i])
         floor32 = -np.float32(limit + 1e-6 * abs(limit) + 1e-30)
         full = overflow[i]
@@ -608,24 +611,24 @@ def _bounded_chunk(
                     seen = seen or seeds[i, t] == j
                 if seen:
                     continue
-                rec = records[j]
                 proj = q_sq[i] + 2.0 * np.float64(v) - l_err[i]
-                gap = (np.sqrt(proj) if proj > 0.0 else 0.0) - q_err[i] - rec[0]
+                gap = (np.sqrt(proj) if proj > 0.0 else 0.0) - q_err[i] - b_errors[0]
                 lower = (gap / sigma) ** 2 if gap > 0.0 else 0.0
-                res = abs(q_res[i] - rec[1]) - q_res_err[i] - rec[2]
+                res = abs(q_res[i] - b_res[j]) - q_res_err[i] - b_errors[1]
                 if res > 0.0:
                     lower += res * res
                 if lower > bound:
                     continue
                 if n_ext > 0:  # the next coordinates and the residual beyond them
                     ext = 0.0
+                    ext_j = b_ext[j]
                     for t in range(n_ext):
-                        e = q_extra[t] - rec[5 + t]
+                        e = q_extra[t] - np.float64(ext_j[t])
                         ext += e * e
                     proj += ext * (1.0 - gamma_e)
-                    gap = (np.sqrt(proj) if proj > 0.0 else 0.0) - q_err[i] - rec[0]
+                    gap = (np.sqrt(proj) if proj > 0.0 else 0.0) - q_err[i] - b_errors[0]
                     lower = (gap / sigma) ** 2 if gap > 0.0 else 0.0
-                    res = abs(q_res2[i] - rec[3]) - q_res2_err[i] - rec[4]
+                    res = abs(q_res2[i] - b_res2[j]) - q_res2_err[i] - b_errors[2]
                     if res > 0.0:
                         lower += res * res
                     if lower > bound:
@@ -637,7 +640,7 @@ def _bounded_chunk(
                 if x * (1.0 + gamma_x) < upper[i]:
                     upper[i] = x * (1.0 + gamma_x)
                     bound = upper[i] + _band(band[i], upper[i])
-                    reach = sigma * np.sqrt(bound) + q_err[i] + b_err_max
+                    reach = sigma * np.sqrt(bound) + q_err[i] + b_errors[0]
                     limit = 0.5 * (reach * reach + l_err[i] - q_sq[i])
                     floor32 = -np.float32(limit + 1e-6 * abs(limit) + 1e-30)
                 if n_kept == capacity:  # drop the rows that can no longer be within the band
@@ -690,6 +693,38 @@ def _bounded_merge(best_j, best_x, keep_x, kept, overflow, gamma_x, bands, index
             counts[i, t] = n
 
 
+@jit()
+def _isolation_sweep(order, keys, slack, bank, radius2, gamma_x, isolated):
+    """Clear ``isolated[k]`` for every row with another row within ``radius2[k]`` (squared).
+
+    ``keys`` are the coordinates of the rows on a few orthonormal directions (within
+    ``slack`` of the exact ones, ``radius2`` scaled for their departure from
+    orthonormality), ``order`` sorts the first; two rows whose coordinates lie farther apart
+    than the largest radius plus ``slack`` are farther apart than that radius, so each row
+    meets only its neighbours in the order of the first coordinate, and only those near in
+    every coordinate get their exact distance.
+    """
+    n, n_keys = keys.shape
+    reach = np.sqrt(radius2.max()) + slack
+    for s in range(n):
+        a = order[s]
+        for t in range(s + 1, n):
+            j = order[t]
+            if keys[j, 0] - keys[a, 0] > reach:
+                break
+            near = 0.0
+            for c in range(1, n_keys):
+                e = keys[j, c] - keys[a, c]
+                near += e * e
+            if near > reach * reach * (1.0 + gamma_x):
+                continue
+            x = _squared_distance(bank[a], bank[j])
+            if x <= radius2[a] * (1.0 + gamma_x) + 1e-300:
+                isolated[a] = False
+            if x <= radius2[j] * (1.0 + gamma_x) + 1e-300:
+                isolated[j] = False
+
+
 class BoundedNearestIndex:
     """Exact nearest bank rows, proven: projected lower bounds screen, float64 distances decide.
 
@@ -732,7 +767,7 @@ class BoundedNearestIndex:
         extra: int = 32,
         block: int = 256,
         chunk: int = 2048,
-        capacity: int = 256,
+        capacity: int = 64,
     ):
         bank = np.ascontiguousarray(bank, dtype=np.float64)
         if bank.ndim != 2 or bank.shape[0] == 0:
@@ -757,16 +792,36 @@ class BoundedNearestIndex:
         # the products come out less half the bank rows' squared norms: [p, 1] . [b, -|b|^2 / 2]
         self._proj32_t = np.ascontiguousarray(np.vstack([proj32.T, -(0.5 * p_sq).astype(np.float32)]))
         self._proj_max = float(np.sqrt(p_sq.max()))
-        terms = self._side_terms(centred, full)
-        self._b_err_max = float(terms[0].max())
-        ext = full[:, dims:].astype(np.float32).astype(np.float64)
-        self._records = np.ascontiguousarray(np.column_stack(terms + (ext,)))
+        err, res, res_err, res2, res2_err = self._side_terms(centred, full)
+        self._b_errors = np.array([err.max(), res_err.max(), res2_err.max()])
+        self._b_err_max = float(err.max())
+        self._b_res, self._b_res2 = res, res2
+        self._b_ext = np.ascontiguousarray(full[:, dims:].astype(np.float32))
         self.block = int(block)
         self.chunk = int(chunk)
         self.capacity = int(capacity)
 
     def __len__(self) -> int:
         return self.bank.shape[0]
+
+    def isolated(self, radius2: np.ndarray) -> np.ndarray:
+        """Which rows are proven to have no other row within ``radius2[k]`` (squared distance).
+
+        The rows are swept in the order of their coordinate on the leading principal
+        direction, and compared on the next three (``||V^T (a - b)|| <= sigma ||a - b||``);
+        the exact distances of the pairs these cannot separate decide, with their rounding
+        error.
+        """
+        d = self.bank.shape[1]
+        centred = self.bank - self.mean
+        keys = np.ascontiguousarray(centred @ self.basis[:, : min(4, self.basis.shape[1])])
+        size = np.sqrt(np.einsum("kd,kd->k", centred, centred))
+        slack = 4.0 * (_gamma(d + 3, _U64) * self._sigma * float(size.max()) + 1e-300)
+        radius2 = np.ascontiguousarray(radius2, dtype=np.float64) * self._sigma**2
+        isolated = np.ones(len(self), dtype=np.bool_)
+        order = np.argsort(keys[:, 0], kind="stable")
+        _isolation_sweep(order, keys, slack, self.bank, radius2, 1.01 * _gamma(d + 3, _U64), isolated)
+        return isolated
 
     def _side_terms(self, centred: np.ndarray, full: np.ndarray) -> tuple[np.ndarray, ...]:
         """Projection error bound, residual norms and their error bounds of centred rows.
@@ -881,17 +936,21 @@ class BoundedNearestIndex:
         kept = np.empty((n_parts, m), dtype=np.int64)
         overflow = np.zeros((n_parts, m), dtype=np.bool_)
 
+        # the seeds, once: their rows are kept by part 0, their bound starts every part
+        _bounded_seeds(
+            q, self.bank, seeds, gamma_x, best_j[0], best_x[0], upper[0], keep_j[0], keep_x[0], kept[0]
+        )
+        upper[1:] = upper[0]
+        best_j[1:], best_x[1:], kept[1:] = -1, np.inf, 0
+
         def search_part(p: int) -> None:
             lo, hi = edges[p], edges[p + 1]
-            _bounded_seeds(
-                q, self.bank, seeds, lo, hi, gamma_x, best_j[p], best_x[p], upper[p], keep_j[p],
-                keep_x[p], kept[p],
-            )  # fmt: skip
             for c0 in range(lo, hi, self.chunk):
                 c1 = min(hi, c0 + self.chunk)
                 _bounded_chunk(
                     proj32 @ self._proj32_t[:, c0:c1], c0, q, self.bank, seeds, q_sq, q_err, l_err,
-                    q_res, q_res_err, q_ext, q_res2, q_res2_err, self._records, self._b_err_max,
+                    q_res, q_res_err, q_ext, q_res2, q_res2_err, self._b_res, self._b_res2, self._b_ext,
+                    self._b_errors,
                     self._sigma, gamma_x, gamma_e, band, best_j[p], best_x[p], upper[p], keep_j[p],
                     keep_x[p], kept[p], overflow[p],
                 )  # fmt: skip
@@ -900,39 +959,83 @@ class BoundedNearestIndex:
         _bounded_merge(best_j, best_x, keep_x, kept, overflow, gamma_x, bands, index, distance, counts)
 
 
+def bounded_index_bytes(rows: float, dim: int, *, dims: int = 32, extra: int = 32) -> tuple[float, float]:
+    """``(kept, building)`` bytes of a :class:`BoundedNearestIndex` of ``rows`` rows of ``dim`` values.
+
+    ``kept``: the float32 projections and next coordinates, the residual norms and the
+    basis (the bank itself is the caller's and not counted); ``building``: the centred copy
+    of the bank, its coordinates and their squares, while the index is built or
+    :meth:`~BoundedNearestIndex.isolated` runs (``docs/memory.md``). A query of ``m`` rows
+    adds a few ``m x dim`` arrays and, per worker, ``m x chunk`` float32 products.
+    """
+    p = min(dims, dim)
+    t = min(p + max(extra, 0), dim)
+    kept = rows * (4.0 * (p + 1) + 4.0 * (t - p) + 16.0) + 8.0 * dim * (t + 1)
+    building = rows * (8.0 * dim + 24.0 * t + 12.0 * p + 48.0) + 8.0 * dim * dim
+    return kept, building
+
+
+def nearest_rows_band(queries: np.ndarray, bank_norm_max: float) -> np.ndarray:
+    """How far from the smallest distance the row :func:`nearest_rows` picks can be (squared).
+
+    :func:`nearest_rows` picks the smallest computed ``||b||^2 - 2 q . b``; whatever order its
+    products sum in, each value is within ``E = 2.2 gamma_{D+2} (max ||b|| + ||q||)^2`` of
+    the true ``||q - b||^2 - ||q||^2``, so the row it picks has a true squared distance within
+    ``2 E`` of the smallest.
+    """
+    queries = np.asarray(queries, dtype=np.float64)
+    q_norm = np.sqrt(np.einsum("kd,kd->k", queries, queries))
+    return 2.0 * 2.2 * _gamma(queries.shape[1] + 2, _U64) * (bank_norm_max + q_norm) ** 2
+
+
 def nearest_rows_bounded(
     queries: np.ndarray,
     bank: np.ndarray,
     bank_norm: np.ndarray,
     index: BoundedNearestIndex,
     seeds: np.ndarray | None = None,
+    isolated: np.ndarray | None = None,
 ) -> np.ndarray:
     """:func:`nearest_rows`, the same rows, through a :class:`BoundedNearestIndex` of ``bank``.
 
-    :func:`nearest_rows` picks the smallest computed ``||b||^2 - 2 q . b``; whatever order
-    its products sum in, each value is within ``E = 2.2 gamma_{D+2} (max ||b|| + ||q||)^2``
-    of the true ``||q - b||^2 - ||q||^2``, so the row it picks has a true squared distance
-    within ``2 E`` of the smallest. Where the index proves that a single row lies within
-    that band, that row is :func:`nearest_rows`'s answer; a block of queries with any other
-    count (exact ties between identical rows) is answered by :func:`nearest_rows` itself, on
-    the whole block, so that its products are the ones it would have computed.
+    The row :func:`nearest_rows` picks has a true squared distance within
+        :func:`nearest_rows_band` of the smallest. Where the index proves that a single row
+        lies within that band, that row is :func:`nearest_rows`'s answer; a block of queries with
+        any other count (exact ties between identical rows) is answered by :func:`nearest_rows`
+        itself, on the whole block, so that its products are the ones it would have computed.
+        A query equal to one of its seeds whose row is ``isolated`` (no other row within the
+        band: :meth:`BoundedNearestIndex.isolated` of :func:`nearest_rows_band` of the bank
+        itself) needs no search.
 
-    Parameters
-    ----------
-    queries : ndarray, shape (Q, D)
-    bank : ndarray, shape (K, D)
-        The rows ``index`` was built on.
-    bank_norm : ndarray, shape (K,)
-        ``np.sum(bank * bank, axis=1)``, as :func:`nearest_rows` takes it.
-    index : BoundedNearestIndex
-    seeds : ndarray of int, shape (Q, S), optional
-        Likely rows, passed to :meth:`BoundedNearestIndex.query`.
+        Parameters
+        ----------
+        queries : ndarray, shape (Q, D)
+        bank : ndarray, shape (K, D)
+            The rows ``index`` was built on.
+        bank_norm : ndarray, shape (K,)
+            ``np.sum(bank * bank, axis=1)``, as :func:`nearest_rows` takes it.
+        index : BoundedNearestIndex
+        seeds : ndarray of int, shape (Q, S), optional
+            Likely rows, passed to :meth:`BoundedNearestIndex.query`.
+        isolated : ndarray of bool, shape (K,), optional
+            The bank rows with no other row within their band.
     """
-    queries = np.asarray(queries, dtype=np.float64)
-    d = queries.shape[1]
-    q_norm = np.sqrt(np.einsum("kd,kd->k", queries, queries))
-    band = 2.0 * 2.2 * _gamma(d + 2, _U64) * (index.norm_max + q_norm) ** 2
-    best, _, counts = index.query(queries, band[:, None], seeds)
-    if np.any(counts[:, 0] != 1):
-        return nearest_rows(queries, bank, bank_norm)
+    queries = np.ascontiguousarray(queries, dtype=np.float64)
+    best = np.full(queries.shape[0], -1, dtype=np.int64)
+    if seeds is not None and isolated is not None:
+        seeds = np.asarray(seeds, dtype=np.int64).reshape(queries.shape[0], -1)
+        for s in range(seeds.shape[1]):
+            col = seeds[:, s]
+            equal = (col >= 0) & (best < 0)
+            equal[equal] = np.all(bank[col[equal]] == queries[equal], axis=1) & isolated[col[equal]]
+            best[equal] = col[equal]
+    rest = np.flatnonzero(best < 0)
+    if rest.size:
+        sub_seeds = None if seeds is None else seeds[rest]
+        found, _, counts = index.query(
+            queries[rest], nearest_rows_band(queries[rest], index.norm_max)[:, None], sub_seeds
+        )
+        if np.any(counts[:, 0] != 1):
+            return nearest_rows(queries, bank, bank_norm)
+        best[rest] = found
     return best
