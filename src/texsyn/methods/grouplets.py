@@ -27,7 +27,6 @@ from dataclasses import dataclass
 from typing import Annotated
 
 import numpy as np
-from scipy.ndimage import gaussian_filter
 
 from .._validation import OneOf, Range, check_output_shape, normalize_rng
 from ..drivers.alternating import alternate_projections
@@ -374,6 +373,8 @@ class Grouplets(TextureSynthesizer):
         elif self.initial_flow == "vortices":
             raw = vortex_velocity(shape, rng, scale=scale / 4.0)  # a vortex spans +-2 sigma
         else:
+            from scipy.ndimage import gaussian_filter  # the 'noise' flow only (start-up)
+
             width = 0.3 * min(shape)
             raw = np.stack(
                 [gaussian_filter(rng.standard_normal(shape), width, mode="wrap") for _ in range(2)], axis=-1

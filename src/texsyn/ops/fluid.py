@@ -12,7 +12,6 @@ components in pixels per time unit; everything is periodic.
 from __future__ import annotations
 
 import numpy as np
-from scipy.ndimage import map_coordinates, spline_filter
 
 from .linalg import parallel_map
 
@@ -47,6 +46,8 @@ def advect(field: np.ndarray, velocity: np.ndarray, tau: float = 1.0, *, order: 
     Back-traces every grid point and interpolates (bilinear by default, periodic wrap); applies
     to every channel of ``field`` (``(H, W)`` or ``(H, W, C)``). Unconditionally stable.
     """
+    from scipy.ndimage import map_coordinates  # animations only: not at import (start-up)
+
     g = np.asarray(field, dtype=np.float64)
     u = np.asarray(velocity, dtype=np.float64)
     coords = _grid(g.shape[:2]) - tau * np.moveaxis(u, -1, 0)
@@ -185,6 +186,8 @@ def advect_displacement(displacement: np.ndarray, step: np.ndarray) -> np.ndarra
     displacement, step : ndarray, shape (H, W, 2)
         ``D`` and ``U`` in pixels, ``(row, col)`` components.
     """
+    from scipy.ndimage import map_coordinates
+
     d = np.asarray(displacement, dtype=np.float64)
     u = np.asarray(step, dtype=np.float64)
     back = _grid(d.shape[:2]) - np.moveaxis(u, -1, 0)
@@ -193,6 +196,8 @@ def advect_displacement(displacement: np.ndarray, step: np.ndarray) -> np.ndarra
 
 def prefilter(image: np.ndarray) -> np.ndarray:
     """Periodic cubic B-spline coefficients of every channel of ``(H, W[, C])`` (for :func:`sample_displaced`)."""
+    from scipy.ndimage import spline_filter
+
     return _per_channel(
         lambda x: spline_filter(x, order=3, mode="grid-wrap"), np.asarray(image, dtype=np.float64)
     )
@@ -204,6 +209,8 @@ def sample_displaced(coefficients: np.ndarray, displacement: np.ndarray) -> np.n
     ``coefficients`` come from :func:`prefilter` (computed once per reference image); the
     cubic spline keeps the fine scales that bilinear interpolation would blur.
     """
+    from scipy.ndimage import map_coordinates
+
     c = np.asarray(coefficients, dtype=np.float64)
     d = np.asarray(displacement, dtype=np.float64)
     points = _grid(d.shape[:2]) + np.moveaxis(d, -1, 0)

@@ -399,6 +399,7 @@ def ksvd(
         # the residual with one row per training patch: the patches of an atom are gathered
         # and written back as whole rows (the same values and arithmetic as by columns)
         residual_rows = np.ascontiguousarray(residual.T)
+        del residual  # (memory: one residual at a time)
         for n in range(n_atoms):
             users = np.flatnonzero(w[n])
             if users.size == 0:
@@ -465,12 +466,15 @@ def constrained_matching_pursuit(
     limit = np.full(n_atoms, np.iinfo(np.int64).max) if budget is None else np.asarray(budget, dtype=np.int64)
     # one row per patch and per atom: the kernel reads and updates a patch's correlations
     # (and a Gram column) contiguously; the values are copies, the arithmetic unchanged
+    corr_rows = np.ascontiguousarray(corr.T)
+    del corr  # (memory)
     w = _pursuit(
-        np.ascontiguousarray(corr.T),
+        corr_rows,
         np.ascontiguousarray(np.asarray(g, dtype=np.float64).T),
         int(n_nonzero),
         np.ascontiguousarray(limit),
     )
+    del corr_rows
     return np.ascontiguousarray(w.T)
 
 
