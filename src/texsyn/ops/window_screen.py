@@ -7,8 +7,8 @@ many windows to every exemplar window; :meth:`ScreenBank.choose` finds the windo
 could be candidates of Efros and Leung's rule, computes their exact distances and applies the
 rule, and says where the result could differ from the float64 matrix product of
 :meth:`~texsyn.ops.nonparametric.NonParametricSampler.match` (the sampler then uses that).
-``docs/methods/efros_leung.md``, "Performance", gives the bounds and why the bytes are those of the
-matrix product.
+``docs/methods/efros_leung.md``, "Performance", gives the bounds and why the bytes are
+those of the matrix product.
 
 Why this module is long: the lower bound, the two rounding allowances (float32 products
 below, float64 sums against the matrix product above) and the rule they protect are written
@@ -34,10 +34,11 @@ SCREEN_RADIUS = 4.0
 #: principal colour axes of the exemplar on which the float32 lower bound is computed
 SCREEN_CHANNELS = 2
 #: smallest Gaussian weight of a pixel that enters the lower bound when it becomes known
-#: after the float32 bound was computed (each costs one pass over the exemplar)
+#: after the float32 bound was computed (each adds a term to the bound of every window that
+#: passed the first screen)
 NEW_MIN_WEIGHT = 0.1
 #: factor on the worst-case rounding difference between the exact search's direct sums and
-#: the matrix product of :meth:`NonParametricSampler.match` (at least 2: both errors)
+#: the matrix product of ``NonParametricSampler.match`` (at least 2: both errors)
 SPREAD_SAFETY = 4.0
 #: windows of smallest lower bound whose exact distance bounds the best one from above
 _FIRST = 4
