@@ -370,12 +370,12 @@ def test_interleaved_flow_lines_give_the_associations_of_one_line_at_a_time(name
 
 @pytest.mark.parametrize("sigma", [0.5, 1.0, 2.5, 5.0, 9.0])
 def test_gaussian_wrap_is_scipys_gaussian_filter_byte_for_byte(sigma):
-    """Issue 20: the structure tensor smooths with ``texsyn.ops.flow.gaussian_wrap`` instead of
+    """Issue 20: the structure tensor smooths with ``texsyn.ops.fourier.gaussian_wrap`` instead of
     importing ``scipy.ndimage`` (0.19 s of start-up); it must give SciPy's bytes, also when
     the kernel is wider than the image (several periods)."""
     from scipy.ndimage import gaussian_filter
 
-    from texsyn.ops.flow import gaussian_wrap
+    from texsyn.ops.fourier import gaussian_wrap
 
     rng = np.random.default_rng(14)
     for shape in [(40, 33), (7, 12), (1, 5), (128, 128)]:
