@@ -34,8 +34,10 @@ __all__ = ["ExemplarWindows", "PatchEmbedding", "PatchWaveletTransform", "lle_em
 #: widths whose descriptors are the windows themselves (no block means) and have at most this
 #: many entries get a proven fast search next to their nearest-patch index (``_FastSearch``)
 FAST_SEARCH_DIMENSION = 256
-#: ... and at least this many exemplar positions (below, the plain search is cheap)
+#: ... and at least this many exemplar positions (below, the plain search is cheap), unless
+#: more than this share of the windows have a near twin
 FAST_SEARCH_POSITIONS = 1024
+TWINNED_WINDOWS = 0.01
 
 
 class _Immutable:
@@ -144,8 +146,11 @@ class _FastSearch:
         self.mean = index.mean
         self.search = BoundedNearestIndex(bank)
         self.centred_max = float(np.sqrt(np.max(np.einsum("kd,kd->k", bank - self.mean, bank - self.mean))))
-        # no other window within the ranking band of a window itself (x = 0: the band's constant)
-        self.isolated = _read_only(self.search.isolated(self.bands(bank)[:, 0, 2]))
+        # no other window within the ranking band of a window itself (x = 0: the band's constant);
+        # None (no fast search) when many windows have near twins, whose queries the fast
+        # search could not prove (a flat or binary exemplar)
+        isolated = self.search.isolated(self.bands(bank)[:, 0, 2], limit=int(TWINNED_WINDOWS * len(bank)))
+        self.isolated = None if isolated is None else _read_only(isolated)
 
     def bands(self, queries: np.ndarray) -> np.ndarray:
         """``(Q, 2, 3)``: the float32 ranking band and the float64 tie band of every query."""
@@ -432,7 +437,8 @@ class PatchWaveletTransform(_Immutable, PatchLifting):
         bank = self.windows.descriptors(rows, cols, width)
         if not _rows_independent(index, bank):
             return None
-        return _FastSearch(index, bank)
+        fast = _FastSearch(index, bank)
+        return None if fast.isolated is None else fast
 
     def _build_embedding(self, width: int) -> PatchEmbedding:
         from scipy.spatial import cKDTree
