@@ -150,7 +150,7 @@ class _FastSearch:
         # None (no fast search) when many windows have near twins, whose queries the fast
         # search could not prove (a flat or binary exemplar)
         isolated = self.search.isolated(self.bands(bank)[:, 0, 2], limit=int(TWINNED_WINDOWS * len(bank)))
-        self.isolated = None if isolated is None else _read_only(isolated)
+        self.isolated: np.ndarray | None = None if isolated is None else _read_only(isolated)
 
     def bands(self, queries: np.ndarray) -> np.ndarray:
         """``(Q, 2, 3)``: the float32 ranking band and the float64 tie band of every query."""
@@ -535,7 +535,9 @@ class PatchWaveletTransform(_Immutable, PatchLifting):
         fb = np.where((br < h) & (bc < w), br * w + bc, -1)
         coherent = (ar == br) & (ac == bc) & (fa >= 0)
         out = np.empty(n, dtype=np.int64)
-        direct = coherent & fast.isolated[np.maximum(fa, 0)]
+        isolated = fast.isolated
+        assert isolated is not None  # a transform keeps only fast searches with isolation proofs
+        direct = coherent & isolated[np.maximum(fa, 0)]
         out[direct] = fa[direct]
         rest = np.flatnonzero(~direct)
         chunk = max(1, 2**22 // max(1, self.windows.dimension(width)))
@@ -577,15 +579,15 @@ class PatchWaveletTransform(_Immutable, PatchLifting):
         tile_size = np.minimum(BLOCK_ROWS, block_size - (in_block - in_block % BLOCK_ROWS))
         out = np.empty(rows.size, dtype=np.int64)
         alone = tile_size == 1
-        for k in np.flatnonzero(alone):
-            out[k] = index.query(queries_at(rows[k : k + 1]))[0][0]
+        for lone in np.flatnonzero(alone):
+            out[lone] = index.query(queries_at(rows[lone : lone + 1]))[0][0]
         together = np.flatnonzero(~alone)
         for start in range(0, together.size, BLOCK_ROWS):
-            k = together[start : start + BLOCK_ROWS]
-            queries = queries_at(rows[k])
+            batch = together[start : start + BLOCK_ROWS]
+            queries = queries_at(rows[batch])
             if queries.shape[0] % BLOCK_ROWS == 1:  # no single-row tile: repeat the last query
                 queries = np.concatenate([queries, queries[-1:]])
-            out[k] = index.query(queries)[0][: k.size]
+            out[batch] = index.query(queries)[0][: batch.size]
         return out
 
     def estimate_features(self, image: np.ndarray) -> np.ndarray:
