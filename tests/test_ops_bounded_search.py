@@ -89,13 +89,13 @@ def test_wei_levoy_proven_search_gives_the_plain_search_bytes(monkeypatch, worke
 
 def test_patch_wavelet_fast_search_gives_the_index_bytes(monkeypatch):
     import texsyn
-    import texsyn.models.patch_wavelet as pwm
+    import texsyn.models.patch_search as pws
 
     ex = _exemplar()
     fast = texsyn.make_method("patch_wavelet").fit(ex)
     assert 8 in fast.transform_.fast
     got = fast.sample_with_map((128, 128), rng=5)
-    monkeypatch.setattr(pwm, "FAST_SEARCH_POSITIONS", 10**9)
+    monkeypatch.setattr(pws, "FAST_SEARCH_POSITIONS", 10**9)
     plain = texsyn.make_method("patch_wavelet").fit(ex)
     assert not plain.transform_.fast
     want = plain.sample_with_map((128, 128), rng=5)
@@ -106,8 +106,8 @@ def test_patch_wavelet_fast_search_gives_the_index_bytes(monkeypatch):
     first = np.stack([rng.integers(0, 64, 300), rng.integers(0, 64, 300)], axis=1)
     second = (first + rng.integers(-3, 4, (300, 2))) % 64
     rows = np.arange(300)
-    answers = t._nearest_rows(
-        lambda k: t.windows.mean_descriptors(first[k], second[k], 1, 2, 8), rows, 300, 8
+    answers = pws.index_answers(
+        t, lambda k: t.windows.mean_descriptors(first[k], second[k], 1, 2, 8), rows, 300, 8
     )
     assert np.array_equal(answers, plain.transform_.mean_features(first, second, 1, 2, 8))
     assert np.array_equal(t.mean_features(first, second, 1, 2, 8), answers)

@@ -34,7 +34,8 @@ import numpy as np
 from .._validation import OneOf, Range, as_exemplar
 from ..drivers.coarse_to_fine import coarse_to_fine
 from ..errors import InputError
-from ..models.patch_wavelet import FAST_SEARCH_DIMENSION, FAST_SEARCH_POSITIONS, PatchWaveletTransform
+from ..models.patch_search import FAST_SEARCH_DIMENSION, FAST_SEARCH_POSITIONS
+from ..models.patch_wavelet import PatchWaveletTransform
 from ..ops import as_channels, match_histogram
 from ..ops.canvas import crop_to_output, extend_to_canvas, power_of_two_canvas
 from ..ops.color import colour_space

@@ -61,6 +61,8 @@ __all__ = ["WeiLevoy", "causal_offsets", "TSVQ"]  # TSVQ: from texsyn.ops.tsvq, 
 #: levels whose bank has at least this many rows are searched through a
 #: :class:`~texsyn.ops.search.BoundedNearestIndex` (the same rows as the plain product, proven)
 BOUNDED_SEARCH_ROWS = 2048
+#: ... unless more than this share of its rows have another row at the same place (ties)
+TWINNED_ROWS = 0.01
 
 
 def causal_offsets(window: int) -> np.ndarray:
@@ -79,7 +81,8 @@ def _gather(image: np.ndarray, rows: np.ndarray, cols: np.ndarray, offsets: np.n
     h, w = image.shape[:2]
     rr = (rows[:, None] + offsets[None, :, 0]) % h
     cc = (cols[:, None] + offsets[None, :, 1]) % w
-    return image[rr, cc].reshape(len(rows), -1)
+    flat = image.reshape(h * w, -1)
+    return np.take(flat, rr * w + cc, axis=0).reshape(len(rows), -1)
 
 
 class WeiLevoy(TextureSynthesizer):
@@ -212,14 +215,21 @@ class WeiLevoy(TextureSynthesizer):
             self.banks_.append(bank)
             self.norms_.append(np.sum(bank * bank, axis=1))
             self.trees_.append(TSVQ(bank, self.leaf_size, rng) if self.search == "tsvq" else None)
-            index = None
+            index = isolated = None
             if self.search == "exact" and len(bank) >= BOUNDED_SEARCH_ROWS:
                 index = BoundedNearestIndex(bank)
-                # rows that no other row comes near: a query equal to one needs no search
-                isolated = index.isolated(nearest_rows_band(bank, index.norm_max))
-                isolated.setflags(write=False)
+                # rows that no other row comes near: a query equal to one needs no search;
+                # a bank with many rows that have a twin (a flat or binary exemplar) would send
+                # most queries to the plain search anyway, so it keeps the plain search
+                isolated = index.isolated(
+                    nearest_rows_band(bank, index.norm_max), limit=int(TWINNED_ROWS * len(bank))
+                )
+                if isolated is None:
+                    index = None
+                else:
+                    isolated.setflags(write=False)
             self.indexes_.append(index)
-            self.isolated_.append(isolated if index is not None else None)
+            self.isolated_.append(isolated)
 
     def _sample(self, shape, rng, callback):
         """Step 2: the output pyramid, coarse to fine; the finest level and its sources."""

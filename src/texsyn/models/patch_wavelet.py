@@ -12,6 +12,10 @@
 Everything is built in the constructors and never changed afterwards (assigning an attribute
 raises): a fitted transform can be shared between threads or pickled for batch workers. What
 was not built ahead is built for the call that needs it (``docs/methods/patch_wavelet.md``).
+
+Why this module is long: the exemplar's windows and the transform over them belong together
+(the transform's constructor builds, from the windows, every index, proven fast search and
+embedding a walk may use); the fast search itself is :mod:`texsyn.models.patch_search`.
 """
 
 from __future__ import annotations
@@ -23,19 +27,13 @@ from collections.abc import Iterable
 import numpy as np
 from scipy.ndimage import uniform_filter
 
-from ..ops.linalg import BLOCK_COLUMNS, BLOCK_ROWS, matmul
 from ..ops.patches import as_channels, wrap_seam_ratio
-from ..ops.search import BoundedNearestIndex, NearestPatchIndex
+from ..ops.search import NearestPatchIndex
 from ..transforms.patch_wavelet import PatchLifting, largest_width
 from .patch_embedding import PatchEmbedding, lle_embedding
+from .patch_search import FastSearch, proven_mean_features
 
 __all__ = ["ExemplarWindows", "PatchEmbedding", "PatchWaveletTransform", "lle_embedding"]
-
-#: widths whose descriptors are the windows themselves (no block means) and have at most this
-#: many entries get a proven fast search next to their nearest-patch index (``_FastSearch``)
-FAST_SEARCH_DIMENSION = 256
-#: ... and at least this many exemplar positions (below, the plain search is cheap)
-FAST_SEARCH_POSITIONS = 1024
 
 
 class _Immutable:
@@ -72,103 +70,6 @@ def _read_only(array: np.ndarray) -> np.ndarray:
 def _window_rows(windows: ExemplarWindows, ecols: int, width: int, flat: np.ndarray) -> np.ndarray:
     """Exact descriptors of the exemplar windows at flat positions (a picklable re-ranking source)."""
     return windows.descriptors(flat // ecols, flat % ecols, width)
-
-
-_U64 = 2.0**-53
-_U32 = 2.0**-24
-
-
-def _gamma(n: float, u: float) -> float:
-    """Higham's ``gamma_n = n u / (1 - n u)``."""
-    return n * u / (1.0 - n * u)
-
-
-def _rows_independent(index: NearestPatchIndex, rows: np.ndarray) -> bool:
-    """Whether this BLAS gives every row of the index's products the same bits in any batch.
-
-    The fast search answers most queries itself and hands the few it cannot prove to the
-    index in batches other than the ones the plain search would have formed; that changes
-    no byte only if a row's float32 products (whole tiles of columns, and the last, shorter
-    one) and float64 re-ranking do not depend on the other rows of the batch, as long as the
-    batch has two rows or more (a lone row keeps the single-row product of the plain
-    search). Checked once per index, on its own rows.
-    """
-    q = rows[:BLOCK_ROWS]
-    q32 = (q - index.mean).astype(np.float32)
-    k = index._bank32.shape[0]
-    widths = {min(k, BLOCK_COLUMNS), k % BLOCK_COLUMNS} - {0}
-    spread = q[:, None, :] - rows[: index.candidates][None]
-    ranked = np.einsum("qkd,qkd->qk", spread, spread)
-    for width in widths:
-        bank32 = index._bank32[k - width :].T
-        full = matmul(q32, bank32)
-        for m in (2, 3, 17, 85):
-            if m < q.shape[0] and not np.array_equal(matmul(q32[:m], bank32), full[:m]):
-                return False
-    for m in (2, 3, 17, 85):
-        part = np.ascontiguousarray(spread[:m])
-        if m < q.shape[0] and not np.array_equal(np.einsum("qkd,qkd->qk", part, part), ranked[:m]):
-            return False
-    return True
-
-
-class _FastSearch:
-    """A proven fast path to a width's :class:`~texsyn.ops.search.NearestPatchIndex`.
-
-    ``NearestPatchIndex.query`` ranks every exemplar window by a float32 score, re-ranks its
-    ``candidates`` best by their float64 distance and returns the nearest of those (the
-    lowest position on a tie). Its float32 score of a window is within
-    ``e = gamma32_{D+3} (||q - m|| + max ||b - m||)^2 / 2`` (``m``: the bank mean) of half
-    the squared distance between the float32-rounded centred vectors, and these are within
-    ``delta = u32 (||q - m|| + max ||b - m||)`` of the exact vectors, so a window can rank
-    before the nearest one only if its squared distance is within
-    ``band(x) = 2 Delta sqrt(x) + Delta^2``, ``Delta = 2 delta + 2 sqrt(e)``, of the smallest
-    ``x``; its float64 distances are within ``gamma_{D+2}`` (relative) of the exact ones.
-    When at most ``candidates`` windows lie within ``band`` (the nearest is then among the
-    re-ranked ones) and only one within ``3 gamma_{D+2} x`` (no other can win the re-ranking),
-    the nearest window is the index's answer: :class:`~texsyn.ops.search.BoundedNearestIndex`
-    finds it and proves both counts. ``isolated[k]``, no other window within ``band(0)`` of
-    the window of position ``k``, is that proof for a query equal to that window (no search
-    needed), which is what the association field's mean of two coherent features is.
-
-    Parameters
-    ----------
-    index : NearestPatchIndex
-        The width's plain index (its mean and candidates).
-    bank : ndarray, shape (K, D)
-        The descriptors of every exemplar position (the index's rows).
-    """
-
-    def __init__(self, index: NearestPatchIndex, bank: np.ndarray):
-        self.candidates = index.candidates
-        self.mean = index.mean
-        self.search = BoundedNearestIndex(bank)
-        self.centred_max = float(np.sqrt(np.max(np.einsum("kd,kd->k", bank - self.mean, bank - self.mean))))
-        # no other window within the ranking band of a window itself (x = 0: the band's constant)
-        self.isolated = _read_only(self.search.isolated(self.bands(bank)[:, 0, 2]))
-
-    def bands(self, queries: np.ndarray) -> np.ndarray:
-        """``(Q, 2, 3)``: the float32 ranking band and the float64 tie band of every query."""
-        d = queries.shape[1]
-        centred = queries - self.mean
-        size = 1.02 * (np.sqrt(np.einsum("kd,kd->k", centred, centred)) + self.centred_max)
-        e = 0.5 * _gamma(d + 3, _U32) * size**2
-        delta = 2.0 * _U32 * size + 2.0 * np.sqrt(e)
-        bands = np.zeros((queries.shape[0], 2, 3))
-        bands[:, 0, 1] = 2.0 * delta
-        bands[:, 0, 2] = delta**2
-        bands[:, 1, 0] = 3.1 * _gamma(d + 2, _U64)
-        bands[:, 1, 2] = 1e-300
-        return bands
-
-    def proven(self, counts: np.ndarray) -> np.ndarray:
-        """Queries whose nearest window is the index's answer, from :meth:`query`'s counts."""
-        return (counts[:, 0] <= self.candidates) & (counts[:, 1] == 1)
-
-    def query(self, queries: np.ndarray, seeds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Nearest window of every query (positions in C order) and the counts of its bands."""
-        best, _, counts = self.search.query(queries, self.bands(queries), seeds)
-        return best, counts
 
 
 class ExemplarWindows(_Immutable):
@@ -391,9 +292,7 @@ class PatchWaveletTransform(_Immutable, PatchLifting):
             ex, exemplar_boundary, max_resolution=max_resolution, widths=index_widths + embedded
         )
         self.indexes = _FrozenDict({v: self._build_index(v) for v in index_widths})
-        self.fast = _FrozenDict(
-            {v: fast for v in index_widths if (fast := self._build_fast(v, self.indexes[v])) is not None}
-        )
+        self.fast = _FrozenDict(FastSearch.for_widths(self.windows, self.indexes))
         self.embeddings = _FrozenDict({v: self._build_embedding(v) for v in embedded})
         self._seal()
 
@@ -421,18 +320,6 @@ class PatchWaveletTransform(_Immutable, PatchLifting):
         bank = self.windows.descriptors(rows, cols, width)
         exact_rows = functools.partial(_window_rows, self.windows, self.exemplar_shape[1], width)
         return NearestPatchIndex(bank, candidates=self.candidates, rows=exact_rows)
-
-    def _build_fast(self, width: int, index: NearestPatchIndex) -> _FastSearch | None:
-        """The proven fast path of a width whose windows are their own descriptors, if it pays."""
-        b, _ = self.windows.layout(width)
-        h, w = self.exemplar_shape
-        if b != 1 or self.windows.dimension(width) > FAST_SEARCH_DIMENSION or h * w < FAST_SEARCH_POSITIONS:
-            return None
-        rows, cols = self.all_positions()
-        bank = self.windows.descriptors(rows, cols, width)
-        if not _rows_independent(index, bank):
-            return None
-        return _FastSearch(index, bank)
 
     def _build_embedding(self, width: int) -> PatchEmbedding:
         from scipy.spatial import cKDTree
@@ -491,96 +378,13 @@ class PatchWaveletTransform(_Immutable, PatchLifting):
         self, first: np.ndarray, second: np.ndarray, axis: int, half_distance: int, width: int
     ) -> np.ndarray:
         """``m^omega(first, second)``: the exemplar window nearest to the glued one (section 3)."""
-        fast = self.fast.get(width)
-        if fast is not None:
-            return self._mean_features_fast(fast, first, second, axis, half_distance, width)
+        if (fast := self.fast.get(width)) is not None:  # the same positions, proven (patch_search)
+            return proven_mean_features(self, fast, first, second, axis, half_distance, width)
         return self._nearest(
             lambda a, b: self.windows.mean_descriptors(first[a:b], second[a:b], axis, half_distance, width),
             first.shape[0],
             width,
         )
-
-    def _mean_features_fast(
-        self,
-        fast: _FastSearch,
-        first: np.ndarray,
-        second: np.ndarray,
-        axis: int,
-        half_distance: int,
-        width: int,
-    ) -> np.ndarray:
-        """:meth:`mean_features` through the width's :class:`_FastSearch`: the same positions.
-
-        The glued window of two coherent features (the second one ``2 s`` further along
-        ``axis``) is the window of the position between them; when that position lies in
-        the exemplar and its window is isolated, it is the answer. The other pairs are
-        searched with the two half windows' positions as seeds, and the pairs the search
-        cannot prove are answered by the index itself (:meth:`_nearest_rows`).
-        """
-        n = first.shape[0]
-        h, w = self.exemplar_shape
-        ph, pw = self.windows.period_image.shape[:2]
-        shift = np.zeros(2, dtype=np.int64)
-        shift[axis] = half_distance
-        a = np.asarray(first, dtype=np.int64) + shift
-        bpos = np.asarray(second, dtype=np.int64) - shift
-        ar, ac, br, bc = a[:, 0] % ph, a[:, 1] % pw, bpos[:, 0] % ph, bpos[:, 1] % pw
-        fa = np.where((ar < h) & (ac < w), ar * w + ac, -1)
-        fb = np.where((br < h) & (bc < w), br * w + bc, -1)
-        coherent = (ar == br) & (ac == bc) & (fa >= 0)
-        out = np.empty(n, dtype=np.int64)
-        direct = coherent & fast.isolated[np.maximum(fa, 0)]
-        out[direct] = fa[direct]
-        rest = np.flatnonzero(~direct)
-        chunk = max(1, 2**22 // max(1, self.windows.dimension(width)))
-        doubtful = []
-        for start in range(0, rest.size, chunk):
-            r = rest[start : start + chunk]
-            queries = self.windows.mean_descriptors(first[r], second[r], axis, half_distance, width)
-            best, counts = fast.query(queries, np.stack([fa[r], fb[r]], axis=1))
-            proven = fast.proven(counts)
-            out[r[proven]] = best[proven]
-            doubtful.append(r[~proven])
-        rows = np.concatenate(doubtful) if doubtful else rest
-        if rows.size:
-            out[rows] = self._nearest_rows(
-                lambda k: self.windows.mean_descriptors(first[k], second[k], axis, half_distance, width),
-                rows,
-                n,
-                width,
-            )
-        return out
-
-    def _nearest_rows(self, queries_at, rows: np.ndarray, n: int, width: int) -> np.ndarray:
-        """What :meth:`_nearest` would answer for the queries ``rows`` of ``n``, computed for those only.
-
-        :meth:`_nearest` cuts its ``n`` queries into chunks, the index cuts chunks into
-        blocks and :func:`~texsyn.ops.linalg.matmul` cuts blocks into tiles of
-        :data:`~texsyn.ops.linalg.BLOCK_ROWS` rows. A query alone in its tile had a
-        single-row product; the others had several rows, and a row's products do not depend
-        on the other rows (:func:`_rows_independent`, checked when the fast path was built).
-        So the lone ones are asked alone again and the others together, in batches of one
-        tile (a batch of one row gets a copy of it, so that no tile has a single row).
-        """
-        index = self.index(width)
-        chunk = max(1, 2**22 // max(1, self.windows.dimension(width)))
-        offset = rows % chunk
-        chunk_size = np.minimum(chunk, n - (rows - offset))
-        in_block = offset % index.block
-        block_size = np.minimum(index.block, chunk_size - (offset - in_block))
-        tile_size = np.minimum(BLOCK_ROWS, block_size - (in_block - in_block % BLOCK_ROWS))
-        out = np.empty(rows.size, dtype=np.int64)
-        alone = tile_size == 1
-        for k in np.flatnonzero(alone):
-            out[k] = index.query(queries_at(rows[k : k + 1]))[0][0]
-        together = np.flatnonzero(~alone)
-        for start in range(0, together.size, BLOCK_ROWS):
-            k = together[start : start + BLOCK_ROWS]
-            queries = queries_at(rows[k])
-            if queries.shape[0] % BLOCK_ROWS == 1:  # no single-row tile: repeat the last query
-                queries = np.concatenate([queries, queries[-1:]])
-            out[k] = index.query(queries)[0][: k.size]
-        return out
 
     def estimate_features(self, image: np.ndarray) -> np.ndarray:
         """Best-fitting exemplar position of every pixel of ``image`` (eq. 4).

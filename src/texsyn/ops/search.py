@@ -28,7 +28,7 @@ from collections.abc import Callable
 import numpy as np
 
 from .jit import jit, prange
-from .linalg import matmul, parallel_map, worker_count
+from .linalg import BLOCK_COLUMNS, BLOCK_ROWS, fixed_order, matmul, parallel_map, worker_count
 from .patches import as_channels
 
 __all__ = [
@@ -665,8 +665,14 @@ def _bounded_chunk(
 
 
 @jit()
-def _bounded_merge(best_j, best_x, keep_x, kept, overflow, gamma_x, bands, index, distance, counts):
-    """Join the parts of :func:`_bounded_part`: the best row, and the rows within each band."""
+def _bounded_merge(
+    best_j, best_x, keep_j, keep_x, kept, overflow, gamma_x, bands, index, distance, counts, members
+):  # fmt: skip
+    """Join the parts of :func:`_bounded_chunk`: the best row, and the rows within each band.
+
+    ``members[i, :counts[i, 0]]`` are the rows counted in the first band (unless the query
+    overflowed).
+    """
     n_parts, m = best_j.shape
     capacity = keep_x.shape[2]
     for i in range(m):
@@ -689,13 +695,17 @@ def _bounded_merge(best_j, best_x, keep_x, kept, overflow, gamma_x, bands, index
             for p in range(n_parts):
                 for r in range(kept[p, i]):
                     if keep_x[p, i, r] <= cut:
+                        if t == 0:
+                            members[i, n] = keep_j[p, i, r]
                         n += 1
             counts[i, t] = n
 
 
 @jit()
-def _isolation_sweep(order, keys, slack, bank, radius2, gamma_x, isolated):
+def _isolation_sweep(order, keys, slack, bank, radius2, gamma_x, limit, isolated):
     """Clear ``isolated[k]`` for every row with another row within ``radius2[k]`` (squared).
+
+    Stops, returning False, once more than ``limit`` rows are cleared.
 
     ``keys`` are the coordinates of the rows on a few orthonormal directions (within
     ``slack`` of the exact ones, ``radius2`` scaled for their departure from
@@ -706,6 +716,7 @@ def _isolation_sweep(order, keys, slack, bank, radius2, gamma_x, isolated):
     """
     n, n_keys = keys.shape
     reach = np.sqrt(radius2.max()) + slack
+    cleared = 0
     for s in range(n):
         a = order[s]
         for t in range(s + 1, n):
@@ -719,10 +730,15 @@ def _isolation_sweep(order, keys, slack, bank, radius2, gamma_x, isolated):
             if near > reach * reach * (1.0 + gamma_x):
                 continue
             x = _squared_distance(bank[a], bank[j])
-            if x <= radius2[a] * (1.0 + gamma_x) + 1e-300:
+            if x <= radius2[a] * (1.0 + gamma_x) + 1e-300 and isolated[a]:
                 isolated[a] = False
-            if x <= radius2[j] * (1.0 + gamma_x) + 1e-300:
+                cleared += 1
+            if x <= radius2[j] * (1.0 + gamma_x) + 1e-300 and isolated[j]:
                 isolated[j] = False
+                cleared += 1
+            if cleared > limit:
+                return False
+    return True
 
 
 class BoundedNearestIndex:
@@ -804,8 +820,11 @@ class BoundedNearestIndex:
     def __len__(self) -> int:
         return self.bank.shape[0]
 
-    def isolated(self, radius2: np.ndarray) -> np.ndarray:
+    def isolated(self, radius2: np.ndarray, limit: int | None = None) -> np.ndarray | None:
         """Which rows are proven to have no other row within ``radius2[k]`` (squared distance).
+
+        ``None`` when more than ``limit`` rows are not (the sweep stops there: a bank of many
+        identical rows, such as a flat or binary image's, would cost it quadratic time).
 
         The rows are swept in the order of their coordinate on the leading principal
         direction, and compared on the next three (``||V^T (a - b)|| <= sigma ||a - b||``);
@@ -820,7 +839,10 @@ class BoundedNearestIndex:
         radius2 = np.ascontiguousarray(radius2, dtype=np.float64) * self._sigma**2
         isolated = np.ones(len(self), dtype=np.bool_)
         order = np.argsort(keys[:, 0], kind="stable")
-        _isolation_sweep(order, keys, slack, self.bank, radius2, 1.01 * _gamma(d + 3, _U64), isolated)
+        limit = len(self) if limit is None else int(limit)
+        gamma_x = 1.01 * _gamma(d + 3, _U64)
+        if not _isolation_sweep(order, keys, slack, self.bank, radius2, gamma_x, limit, isolated):
+            return None
         return isolated
 
     def _side_terms(self, centred: np.ndarray, full: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -848,8 +870,13 @@ class BoundedNearestIndex:
         return err, res, res_err, res2, res_err
 
     def query(
-        self, queries: np.ndarray, bands: np.ndarray, seeds: np.ndarray | None = None
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        self,
+        queries: np.ndarray,
+        bands: np.ndarray,
+        seeds: np.ndarray | None = None,
+        *,
+        members: bool = False,
+    ) -> tuple[np.ndarray, ...]:
         """Nearest bank row of every query, and how many rows may lie within each band.
 
         The bank is cut into as many column parts as texsyn's thread pool has workers; each
@@ -867,6 +894,8 @@ class BoundedNearestIndex:
             squared distance ``x`` (non-negative: the band grows with ``x``).
         seeds : ndarray of int, shape (Q, S), optional
             Rows likely to be near each query (``-1``: none), for a tight first bound.
+        members : bool
+            Also return the rows counted in the first band.
 
         Returns
         -------
@@ -878,6 +907,9 @@ class BoundedNearestIndex:
             For each band, at least the number of rows ``j`` with
             ``||q - b_j||^2 <= x + band(x)``, ``x = min_k ||q - b_k||^2`` (every such row is
             among those counted); ``capacity + 1`` when the query had too many candidates.
+        members : ndarray of int64, shape (Q, M), only with ``members=True``
+            ``members[i, :counts[i, 0]]``: the rows counted in the first band (when that count
+            is at most ``M``).
         """
         queries = np.ascontiguousarray(queries, dtype=np.float64)
         n, d = queries.shape
@@ -895,13 +927,20 @@ class BoundedNearestIndex:
         counts = np.empty((n, bands.shape[1]), dtype=np.int64)
         gamma_x = 1.01 * _gamma(d + 3, _U64)
         gamma_e = 1.01 * _gamma(self.basis.shape[1] + 3, _U64)
+        found = np.empty((n, self._parts() * self.capacity), dtype=np.int64)
         for start in range(0, n, self.block):
             stop = min(n, start + self.block)
             self._search_block(
                 queries[start:stop], seeds[start:stop], bands[start:stop], gamma_x, gamma_e,
-                index[start:stop], distance[start:stop], counts[start:stop],
+                index[start:stop], distance[start:stop], counts[start:stop], found[start:stop],
             )  # fmt: skip
+        if members:
+            return index, distance, counts, found
         return index, distance, counts
+
+    def _parts(self) -> int:
+        """Parts of the bank searched in parallel: one per worker, of at least 1024 rows."""
+        return max(1, min(worker_count(), len(self) // 1024))
 
     def _search_block(
         self,
@@ -913,10 +952,11 @@ class BoundedNearestIndex:
         index: np.ndarray,
         distance: np.ndarray,
         counts: np.ndarray,
+        members: np.ndarray,
     ) -> None:
         """:meth:`query` of one block of queries, the bank cut into parts searched in parallel."""
         k, m = len(self), q.shape[0]
-        n_parts = max(1, min(worker_count(), k // 1024))
+        n_parts = self._parts()
         edges = [16 * (k * p // (16 * n_parts)) for p in range(n_parts)] + [k]
         centred = q - self.mean
         full = centred @ self.basis
@@ -956,22 +996,24 @@ class BoundedNearestIndex:
                 )  # fmt: skip
 
         parallel_map(search_part, range(n_parts))
-        _bounded_merge(best_j, best_x, keep_x, kept, overflow, gamma_x, bands, index, distance, counts)
+        _bounded_merge(
+            best_j, best_x, keep_j, keep_x, kept, overflow, gamma_x, bands, index, distance, counts, members
+        )  # fmt: skip
 
 
 def bounded_index_bytes(rows: float, dim: int, *, dims: int = 32, extra: int = 32) -> tuple[float, float]:
     """``(kept, building)`` bytes of a :class:`BoundedNearestIndex` of ``rows`` rows of ``dim`` values.
 
     ``kept``: the float32 projections and next coordinates, the residual norms and the
-    basis (the bank itself is the caller's and not counted); ``building``: the centred copy
-    of the bank, its coordinates and their squares, while the index is built or
-    :meth:`~BoundedNearestIndex.isolated` runs (``docs/memory.md``). A query of ``m`` rows
-    adds a few ``m x dim`` arrays and, per worker, ``m x chunk`` float32 products.
+    basis (the bank itself is the caller's and not counted); ``building``: the centred copies
+    of the bank (the index's, then :meth:`~BoundedNearestIndex.isolated`'s), its coordinates
+    and their squares (``docs/memory.md``). A query of ``m`` rows adds a few ``m x dim``
+    arrays and, per worker, ``m x chunk`` float32 products.
     """
     p = min(dims, dim)
     t = min(p + max(extra, 0), dim)
     kept = rows * (4.0 * (p + 1) + 4.0 * (t - p) + 16.0) + 8.0 * dim * (t + 1)
-    building = rows * (8.0 * dim + 24.0 * t + 12.0 * p + 48.0) + 8.0 * dim * dim
+    building = rows * (16.0 * dim + 24.0 * t + 12.0 * p + 48.0) + 8.0 * dim * dim
     return kept, building
 
 
@@ -1032,10 +1074,45 @@ def nearest_rows_bounded(
     rest = np.flatnonzero(best < 0)
     if rest.size:
         sub_seeds = None if seeds is None else seeds[rest]
-        found, _, counts = index.query(
-            queries[rest], nearest_rows_band(queries[rest], index.norm_max)[:, None], sub_seeds
+        found, _, counts, members = index.query(
+            queries[rest], nearest_rows_band(queries[rest], index.norm_max)[:, None], sub_seeds, members=True
         )
-        if np.any(counts[:, 0] != 1):
-            return nearest_rows(queries, bank, bank_norm)
         best[rest] = found
+        tied = np.flatnonzero(counts[:, 0] != 1)
+        if tied.size:
+            if np.any(counts[tied, 0] > members.shape[1]):
+                return nearest_rows(queries, bank, bank_norm)
+            best[rest[tied]] = _nearest_rows_among(
+                queries, bank, bank_norm, rest[tied], [members[t, : counts[t, 0]] for t in tied]
+            )
     return best
+
+
+def _nearest_rows_among(
+    queries: np.ndarray, bank: np.ndarray, bank_norm: np.ndarray, rows: np.ndarray, among: list[np.ndarray]
+) -> np.ndarray:
+    """:func:`nearest_rows`'s answer for the queries ``rows``, known to be one of ``among[i]``.
+
+    The values ``||b||^2 - 2 q . b`` of those bank rows are computed by the very products
+    :func:`nearest_rows` makes (:func:`texsyn.ops.linalg.matmul`'s tiles of the whole block
+    of queries, only the tiles of columns that hold a candidate), so the smallest one, the
+    lowest row on a tie, is its answer.
+    """
+    m, n = queries.shape[0], bank.shape[0]
+    b = bank.T
+    columns = sorted({int(c) // BLOCK_COLUMNS for rows_ in among for c in rows_})
+    with fixed_order():
+        if m <= BLOCK_ROWS and n <= BLOCK_COLUMNS:  # one tile: matmul makes one product
+            products = queries @ b
+        else:
+            products = np.empty((m, n))
+            for c in columns:
+                cols = slice(c * BLOCK_COLUMNS, (c + 1) * BLOCK_COLUMNS)
+                for r in range(0, m, BLOCK_ROWS):
+                    np.matmul(queries[r : r + BLOCK_ROWS], b[:, cols], out=products[r : r + BLOCK_ROWS, cols])
+    out = np.empty(len(rows), dtype=np.int64)
+    for k, (i, cand) in enumerate(zip(rows, among, strict=True)):
+        cand = np.sort(cand)
+        values = bank_norm[cand] - 2.0 * products[i, cand]
+        out[k] = cand[np.argmin(values)]
+    return out
