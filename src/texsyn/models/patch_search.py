@@ -74,10 +74,10 @@ def rows_independent(index: NearestPatchIndex, rows: np.ndarray) -> bool:
     for width in widths:
         bank32 = index._bank32[k - width :].T
         full = matmul(q32, bank32)
-        for m in (2, 3, 17, 85):
+        for m in (2, 3, 5, 8, 17, 31, 64, 85, 129, 200):
             if m < q.shape[0] and not np.array_equal(matmul(q32[:m], bank32), full[:m]):
                 return False
-    for m in (2, 3, 17, 85):
+    for m in (2, 3, 5, 8, 17, 31, 64, 85, 129, 200):
         part = np.ascontiguousarray(spread[:m])
         if m < q.shape[0] and not np.array_equal(np.einsum("qkd,qkd->qk", part, part), ranked[:m]):
             return False
