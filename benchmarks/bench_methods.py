@@ -190,7 +190,11 @@ def child_main(method: str, kind: str, sizes: str, repeats: str, textures: str, 
     import texsyn
 
     image = exemplar(Path(textures), kind)
-    texsyn.make_method(method).fit(image[:WARM_SIZE, :WARM_SIZE]).sample((WARM_SIZE, WARM_SIZE), rng=0)
+    side = max(WARM_SIZE, 4 * texsyn.make_method(method).min_exemplar_size()[0])
+    warm = image[:side, :side]
+    if method == "sparse":  # its multiscale fit needs enough patches at every scale
+        warm = image
+    texsyn.make_method(method).fit(warm).sample((WARM_SIZE, WARM_SIZE), rng=0)
     for size in (int(s) for s in sizes.split(",")):
         walls, cpus, peaks = [], [], []
         for r in range(int(repeats)):
