@@ -67,9 +67,14 @@ GROUPS: dict[str, tuple[list[str], list[str]]] = {
             "transforms/patch_wavelet.py",
             "models/patch_wavelet.py",
             "models/patch_embedding.py",
+            "models/patch_search.py",
             "methods/patch_wavelet.py",
         ],
-        ["tests/test_patch_wavelet.py", "tests/test_strength_patch_wavelet.py"],
+        [
+            "tests/test_patch_wavelet.py",
+            "tests/test_strength_patch_wavelet.py",
+            "tests/test_ops_bounded_search.py",
+        ],
     ),
     "cwt": (
         ["transforms/dtcwt.py", "drivers/coarse_to_fine.py", "methods/wavelet_sampling.py"],
