@@ -139,7 +139,9 @@ class Quilting(TextureSynthesizer):
         ti, tj = divmod(int(cand[rng.integers(cand.size)]), anchor_cols)
         return ti, tj
 
-    def _paste(self, block: Block, corner: tuple[int, int], exemplar: np.ndarray) -> np.ndarray:
+    def _paste(
+        self, block: Block, corner: tuple[int, int], exemplar: np.ndarray, offsets: np.ndarray
+    ) -> np.ndarray:
         """The block joined along the boundary cut (section 2.1, step 3).
 
         The canvas carries the exemplar position of every pixel as two extra channels
@@ -148,23 +150,19 @@ class Quilting(TextureSynthesizer):
         b, c = self.patch_size, exemplar.shape[2]
         ti, tj = corner
         old = block.values
-        new = np.concatenate([exemplar[ti : ti + b, tj : tj + b], self._offsets + (ti, tj)], axis=-1)
+        new = np.concatenate([exemplar[ti : ti + b, tj : tj + b], offsets + (ti, tj)], axis=-1)
         if self.boundary_cut:
             take = cut_mask(old[..., :c], new[..., :c], block.known)
         else:
             take = np.ones((b, b), dtype=bool)
         return np.where(take[..., None], new, old)
 
-    @property
-    def _offsets(self) -> np.ndarray:
-        b = self.patch_size
-        return np.stack(np.meshgrid(np.arange(b), np.arange(b), indexing="ij"), axis=-1).astype(np.float64)
-
     def _sample_rows(self, shape, rng, callback):
         ex = as_channels(self.exemplar_)
         c = ex.shape[2]
         b, o = self.patch_size, self._overlap()
         energies: dict = {}  # this call's cache of the search's energy terms
+        offsets = np.stack(np.meshgrid(np.arange(b), np.arange(b), indexing="ij"), axis=-1).astype(np.float64)
 
         def choose(block: Block) -> tuple[int, int]:
             return self._choose(
@@ -178,7 +176,7 @@ class Quilting(TextureSynthesizer):
             block_positions(shape[1], b, b - o),
             b,
             choose,
-            lambda block, corner: self._paste(block, corner, ex),
+            lambda block, corner: self._paste(block, corner, ex, offsets),
             reporter=Reporter(callback, "blocks"),
         ):
             yield rows[..., :c], rows[..., c:].astype(np.int32)
