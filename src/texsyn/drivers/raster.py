@@ -194,6 +194,7 @@ def fill_block_rows(
     choose: Callable[[Block], Any],
     paste: Callable[[Block, Any], np.ndarray],
     *,
+    seed: np.ndarray | None = None,
     reporter: Reporter | None = None,
 ) -> Iterator[np.ndarray]:
     """:func:`fill_blocks` holding one row of blocks at a time; yields finished output rows.
@@ -218,8 +219,11 @@ def fill_block_rows(
     choose, paste : callable
         As in :func:`fill_blocks`; a :class:`Block`'s ``row`` is its canvas row, and its
         ``values`` and ``known`` are views of the band.
+    seed : ndarray, shape (n, n, channels), optional
+        Content of the first block, as in :func:`fill_blocks` (placed without
+        ``choose``/``paste``, counted as done, not reported).
     reporter : Reporter, optional
-        Receives ``(done, total)`` after every block.
+        Receives ``(done, total)`` after every block (but the seed).
 
     Yields
     ------
@@ -238,6 +242,11 @@ def fill_block_rows(
         for y in cols:
             window = band[:, y : y + size]
             mask = known[:, y : y + size]
+            if done == 0 and seed is not None:
+                window[...] = seed
+                mask[...] = True
+                done = 1
+                continue
             block = Block(x, int(y), window, mask)
             window[...] = paste(block, choose(block))
             mask[...] = True

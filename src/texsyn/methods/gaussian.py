@@ -54,6 +54,7 @@ from .single_scale_gaussian import (
     overlap_fraction_warning,
     overlap_pixels,
     single_scale,
+    single_scale_rows,
 )
 
 __all__ = ["CLG", "LG", "MSLG", "RCLG", "gaussian_resample", "raster_positions"]
@@ -67,10 +68,27 @@ LOOSENESS = 0.1
 
 
 # ---------------------------------------------------------------------------- Algorithm 2: the methods
+class _StreamsWithoutMatching:
+    """``streams_rows`` of the LG family: true for a model with ``histogram='none'``.
+
+    Algorithm 2 runs in raster order and streams one row of blocks
+    (:func:`~texsyn.methods.single_scale_gaussian.single_scale_rows`), but ``'match'`` is
+    a global last step: exact histogram matching ranks every output value among all the
+    others (ties by position), so no row is final before the whole output is made
+    (``docs/methods/local_gaussian.md``, "Streaming"). Read on the class (as the command
+    line does, before the parameters are known) it is ``False``, the default's answer.
+    """
+
+    def __get__(self, obj: Any, owner: Any = None) -> bool:
+        return obj is not None and obj.histogram == "none"
+
+
 class _LocalGaussianBase(TextureSynthesizer):
     """Shared parameters, fit and sample of the single-scale models (LG, CLG, RCLG)."""
 
     has_source_map = False
+    #: only ``histogram='none'`` streams; the class itself says no (its default is ``'match'``)
+    streams_rows = _StreamsWithoutMatching()  # type: ignore[assignment]
     _model = "lg"
     # set by each subclass's __init__ (its signature is the parameter list)
     patch_size: int
@@ -132,26 +150,56 @@ class _LocalGaussianBase(TextureSynthesizer):
         terms["output image"] = output_bytes(c, output_shape)
         return terms
 
+    def streaming_memory_terms(self, exemplar_shape, output_shape) -> dict[str, float]:
+        """Exemplar spectra, one search or local Gaussian; a band of one row of blocks.
+
+        With ``histogram='none'`` :meth:`sample_rows` holds ``patch_size`` rows of the
+        canvas (float64 and its mask) and the finished rows it yields, as floats, as clipped
+        float32 and as 8- or 16-bit samples and filtered PNG scanlines (about 32 bytes a
+        sample): none grows with the output's height (``docs/performance.md``, "Any size in
+        bounded memory"). With ``'match'`` the whole output is made first
+        (:meth:`memory_terms`).
+        """
+        if not self.streams_rows:
+            return self.memory_terms(exemplar_shape, output_shape)
+        terms, query = fft_search_terms(exemplar_shape, masks=9, fitting=False)
+        h, w, c = shape_dims(exemplar_shape)
+        n = self.patch_size
+        width = float(block_canvas(output_shape[:2], n, n - self._overlap_px())[1])
+        m = min(self.n_neighbors, max(1, (h - n + 1) * (w - n + 1)))
+        terms["one search or one local Gaussian"] = max(query, local_gaussian_bytes(m, n * n * c))
+        terms["band of one row of blocks"] = n * width * (8.0 * c + 1.0)
+        terms["finished rows and their encoding"] = n * width * (8.0 * c + 12.0 * c + 32.0 * c)
+        return terms
+
+    def _loop_options(self, rng, callback) -> dict[str, Any]:
+        """The arguments of Algorithm 2's loop (:func:`single_scale`, :func:`single_scale_rows`)."""
+        return {
+            "overlap": self._overlap_px(),
+            "m": clamp_neighbours(self.n_neighbors, self.source_, self.name),
+            "model": self._model,
+            "seam": self.seam,
+            "mode": self.mode,
+            "sigma": getattr(self, "sigma", 0.0),
+            "theta": getattr(self, "theta", 0.0),
+            "looseness": getattr(self, "looseness", 0.0),
+            "seed_patch": self.seed_patch,
+            "rng": rng,
+            "reporter": Reporter(callback, "patches"),
+        }
+
     def _sample(self, shape, rng, callback):
-        out = single_scale(
-            as_channels(self.exemplar_),
-            self.source_,
-            shape,
-            overlap=self._overlap_px(),
-            m=clamp_neighbours(self.n_neighbors, self.source_, self.name),
-            model=self._model,
-            seam=self.seam,
-            mode=self.mode,
-            sigma=getattr(self, "sigma", 0.0),
-            theta=getattr(self, "theta", 0.0),
-            looseness=getattr(self, "looseness", 0.0),
-            seed_patch=self.seed_patch,
-            rng=rng,
-            reporter=Reporter(callback, "patches"),
-        )
+        options = self._loop_options(rng, callback)
+        out = single_scale(as_channels(self.exemplar_), self.source_, shape, **options)
         if self.histogram == "match":
             out = match_exemplar_marginals(out, self.exemplar_, patch_size=self.patch_size)
         return out, None
+
+    def _sample_rows(self, shape, rng, callback):
+        """Algorithm 2 one row of blocks at a time (``histogram='none'`` only, :attr:`streams_rows`)."""
+        options = self._loop_options(rng, callback)
+        for rows in single_scale_rows(as_channels(self.exemplar_), self.source_, shape, **options):
+            yield rows, None
 
 
 class LG(_LocalGaussianBase):

@@ -7,7 +7,8 @@ the steps that differ between them. The paper's box, line by line:
 - line 1, a seed patch in the top-left corner: :func:`first_patch` (an exemplar patch,
   copied or resampled);
 - lines 2-3, raster order in steps of ``n - o``: :func:`single_scale`, through
-  :func:`texsyn.drivers.raster.fill_blocks`;
+  :func:`texsyn.drivers.raster.fill_blocks` (or :func:`single_scale_rows`, one row of
+  blocks at a time, through :func:`texsyn.drivers.raster.fill_block_rows`);
 - lines 5-6, the ``m`` nearest exemplar patches and their Gaussian ``(mu, Sigma)``:
   :meth:`texsyn.models.gaussian.PatchSource.neighbour_gaussian` (section 2.1, eq. 1);
 - line 7, the new patch: :func:`lg_patch` (LG, section 2.2) or :func:`conditional_patch`
@@ -23,13 +24,13 @@ cache of the search's energy terms (``energies``), so the fitted
 from __future__ import annotations
 
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
-from ..drivers.raster import Block, block_canvas, block_positions, fill_blocks
+from ..drivers.raster import Block, block_canvas, block_positions, fill_block_rows, fill_blocks
 from ..errors import InputError
 from ..models.gaussian import LocalGaussian, PatchSource
 from ..ops.canvas import crop_to_output
@@ -52,6 +53,7 @@ __all__ = [
     "overlap_fraction_warning",
     "overlap_pixels",
     "single_scale",
+    "single_scale_rows",
 ]
 
 
@@ -268,6 +270,39 @@ PASTE: dict[str, Callable[[Block, np.ndarray], np.ndarray]] = {
 
 
 # ---------------------------------------------------------------------------- the loop
+def _first_and_choose(
+    exemplar: np.ndarray,
+    source: PatchSource,
+    *,
+    m: int,
+    model: str,
+    mode: str,
+    sigma: float,
+    theta: float,
+    seed_patch: str,
+    rng: np.random.Generator,
+    looseness: float,
+) -> tuple[np.ndarray, Callable[[Block], np.ndarray]]:
+    """Line 1's seed patch (drawn first) and lines 5-7 as the loop's ``choose`` step.
+
+    Both share one cache of the search's energy terms, made here for one sampling call.
+    """
+    energies: dict = {}  # this call's cache of the search's energy terms
+    first = first_patch(source, exemplar, m, seed_patch, mode, rng, energies)
+    if model == "lg":
+
+        def choose(block: Block) -> np.ndarray:
+            return lg_patch(block, source, m, mode, rng, energies)
+
+    else:
+        moved = theta if model == "rclg" else None
+
+        def choose(block: Block) -> np.ndarray:
+            return conditional_patch(block, source, m, mode, sigma, moved, rng, energies, looseness)
+
+    return first, choose
+
+
 def single_scale(
     exemplar: np.ndarray,
     source: PatchSource,
@@ -292,6 +327,8 @@ def single_scale(
        from the local Gaussian of its ``m`` neighbours (``model='lg'``: :func:`lg_patch`;
        ``'clg'``, ``'rclg'``: conditioned on the overlap, :func:`conditional_patch`), joined
        by ``seam`` (:data:`PASTE`).
+
+    :func:`single_scale_rows` runs the same loop holding one row of blocks.
 
     Parameters
     ----------
@@ -318,20 +355,69 @@ def single_scale(
     """
     n = source.size
     step = n - overlap
-    energies: dict = {}  # this call's cache of the search's energy terms
     canvas = np.zeros(block_canvas(shape, n, step) + (exemplar.shape[2],))
-    first = first_patch(source, exemplar, m, seed_patch, mode, rng, energies)
-    if model == "lg":
-
-        def choose(block: Block) -> np.ndarray:
-            return lg_patch(block, source, m, mode, rng, energies)
-
-    else:
-        moved = theta if model == "rclg" else None
-
-        def choose(block: Block) -> np.ndarray:
-            return conditional_patch(block, source, m, mode, sigma, moved, rng, energies, looseness)
-
+    first, choose = _first_and_choose(
+        exemplar,
+        source,
+        m=m,
+        model=model,
+        mode=mode,
+        sigma=sigma,
+        theta=theta,
+        seed_patch=seed_patch,
+        rng=rng,
+        looseness=looseness,
+    )
     rows, cols = block_positions(shape[0], n, step), block_positions(shape[1], n, step)
     fill_blocks(canvas, rows, cols, n, choose, PASTE[seam], seed=first, reporter=reporter)
     return crop_to_output(canvas, shape)
+
+
+def single_scale_rows(
+    exemplar: np.ndarray,
+    source: PatchSource,
+    shape: tuple[int, int],
+    *,
+    overlap: int,
+    m: int,
+    model: str,
+    seam: str,
+    mode: str,
+    sigma: float,
+    theta: float,
+    seed_patch: str,
+    rng: np.random.Generator,
+    reporter: Reporter | None,
+    looseness: float = 0.0,
+) -> Iterator[np.ndarray]:
+    """:func:`single_scale` holding one row of blocks: its output rows, top to bottom.
+
+    The same draws in the same order (the seed patch, then the blocks in raster order), the
+    same blocks and the same pastes, through :func:`texsyn.drivers.raster.fill_block_rows`:
+    the rows put together are :func:`single_scale`'s output, byte for byte, and the memory
+    is ``n`` rows of the canvas whatever the output's height (``docs/performance.md``,
+    "Any size in bounded memory"). Parameters as in :func:`single_scale`.
+
+    Yields
+    ------
+    ndarray, shape (k, W, C)
+        The next ``k`` finished rows (float64, not clipped).
+    """
+    n = source.size
+    step = n - overlap
+    first, choose = _first_and_choose(
+        exemplar,
+        source,
+        m=m,
+        model=model,
+        mode=mode,
+        sigma=sigma,
+        theta=theta,
+        seed_patch=seed_patch,
+        rng=rng,
+        looseness=looseness,
+    )
+    rows, cols = block_positions(shape[0], n, step), block_positions(shape[1], n, step)
+    yield from fill_block_rows(
+        shape, exemplar.shape[2], rows, cols, n, choose, PASTE[seam], seed=first, reporter=reporter
+    )
