@@ -68,7 +68,13 @@ CONFIGS = [
 ]
 #: configurations run through ``sample_rows`` (the rows consumed and dropped, as a writer would)
 #: against ``estimate_memory(..., streaming=True)``
-STREAMED_CONFIGS = [("quilting", {}, 128, True, (2048, 2048)), ("quilting", {}, 128, False, (1024, 4096))]
+STREAMED_CONFIGS = [
+    ("quilting", {}, 128, True, (2048, 2048)),
+    ("quilting", {}, 128, False, (1024, 4096)),
+    ("lg", {"histogram": "none"}, 128, True, (1024, 2048)),
+    ("clg", {"histogram": "none"}, 128, False, (512, 4096)),
+    ("rclg", {"histogram": "none"}, 128, True, (768, 1024)),
+]
 #: texsyn.modify's work: (exemplar side, colour, texture (height, width))
 MODIFY_CONFIGS = [(64, True, (192, 192)), (64, True, (333, 77)), (128, False, (256, 256))]
 

@@ -151,25 +151,26 @@ class _LocalGaussianBase(TextureSynthesizer):
         return terms
 
     def streaming_memory_terms(self, exemplar_shape, output_shape) -> dict[str, float]:
-        """Exemplar spectra, one search or local Gaussian; a band of one row of blocks.
+        """:meth:`memory_terms` without the canvas: a band of one row of blocks instead.
 
-        With ``histogram='none'`` :meth:`sample_rows` holds ``patch_size`` rows of the
-        canvas (float64 and its mask) and the finished rows it yields, as floats, as clipped
-        float32 and as 8- or 16-bit samples and filtered PNG scanlines (about 32 bytes a
-        sample): none grows with the output's height (``docs/performance.md``, "Any size in
-        bounded memory"). With ``'match'`` the whole output is made first
-        (:meth:`memory_terms`).
+        With ``histogram='none'`` :meth:`sample_rows` keeps the exemplar's spectra and makes
+        one search or one local Gaussian at a time, as :meth:`sample` does, but holds
+        ``patch_size`` rows of the canvas (float64 and its mask) and the ``n - o`` finished
+        rows it yields (a float64 copy, then the clipped float32 output): none grows with the
+        output's height (``docs/performance.md``, "Any size in bounded memory"). What a
+        writer then holds to encode a band is the writer's. With ``'match'`` the whole output
+        is made first: :meth:`memory_terms`.
         """
+        whole = self.memory_terms(exemplar_shape, output_shape)
         if not self.streams_rows:
-            return self.memory_terms(exemplar_shape, output_shape)
-        terms, query = fft_search_terms(exemplar_shape, masks=9, fitting=False)
-        h, w, c = shape_dims(exemplar_shape)
+            return whole
+        terms = {k: v for k, v in whole.items() if k not in ("canvas", "output image")}
+        c = shape_dims(exemplar_shape)[2]
         n = self.patch_size
-        width = float(block_canvas(output_shape[:2], n, n - self._overlap_px())[1])
-        m = min(self.n_neighbors, max(1, (h - n + 1) * (w - n + 1)))
-        terms["one search or one local Gaussian"] = max(query, local_gaussian_bytes(m, n * n * c))
+        step = n - self._overlap_px()
+        width = float(block_canvas(output_shape[:2], n, step)[1])
         terms["band of one row of blocks"] = n * width * (8.0 * c + 1.0)
-        terms["finished rows and their encoding"] = n * width * (8.0 * c + 12.0 * c + 32.0 * c)
+        terms["finished rows"] = step * width * (8.0 + 12.0) * c
         return terms
 
     def _loop_options(self, rng, callback) -> dict[str, Any]:
