@@ -19,6 +19,10 @@ The overlap ``o`` is in pixels (:func:`overlap_pixels`). Every ``sample`` call m
 cache of the search's energy terms (``energies``), so the fitted
 :class:`~texsyn.models.gaussian.PatchSource` is never changed (``docs/architecture.md``,
 "Fitted state"). See ``docs/methods/local_gaussian.md``.
+
+Why this module is long: the paper's box is here line by line, next to its loop, which runs
+two ways (on the whole canvas for ``sample`` and MSLG, one row of blocks at a time for
+``sample_rows``); splitting them would separate the algorithm from its steps.
 """
 
 from __future__ import annotations
@@ -273,7 +277,6 @@ PASTE: dict[str, Callable[[Block, np.ndarray], np.ndarray]] = {
 def _first_and_choose(
     exemplar: np.ndarray,
     source: PatchSource,
-    *,
     m: int,
     model: str,
     mode: str,
@@ -357,16 +360,7 @@ def single_scale(
     step = n - overlap
     canvas = np.zeros(block_canvas(shape, n, step) + (exemplar.shape[2],))
     first, choose = _first_and_choose(
-        exemplar,
-        source,
-        m=m,
-        model=model,
-        mode=mode,
-        sigma=sigma,
-        theta=theta,
-        seed_patch=seed_patch,
-        rng=rng,
-        looseness=looseness,
+        exemplar, source, m, model, mode, sigma, theta, seed_patch, rng, looseness
     )
     rows, cols = block_positions(shape[0], n, step), block_positions(shape[1], n, step)
     fill_blocks(canvas, rows, cols, n, choose, PASTE[seam], seed=first, reporter=reporter)
@@ -406,16 +400,7 @@ def single_scale_rows(
     n = source.size
     step = n - overlap
     first, choose = _first_and_choose(
-        exemplar,
-        source,
-        m=m,
-        model=model,
-        mode=mode,
-        sigma=sigma,
-        theta=theta,
-        seed_patch=seed_patch,
-        rng=rng,
-        looseness=looseness,
+        exemplar, source, m, model, mode, sigma, theta, seed_patch, rng, looseness
     )
     rows, cols = block_positions(shape[0], n, step), block_positions(shape[1], n, step)
     yield from fill_block_rows(
