@@ -257,3 +257,24 @@ def test_synth_shrinks_a_photo_sized_exemplar_before_the_memory_check(tmp_path):
     assert done.returncode == 0, done.stderr
     options = __import__("json").loads((tmp_path / "o.png.json").read_text())["options"]
     assert options["exemplar_crop"] == [800, 600] and options["exemplar_max_side"] == 128
+
+
+@pytest.mark.parametrize("histogram,streams", [("none", True), ("match", False)])
+def test_synth_streams_the_local_gaussian_family_only_without_histogram_matching(
+    tmp_path, monkeypatch, exemplar, histogram, streams
+):
+    """The command asks the configured synthesizer, not its class, whether it streams."""
+    from texsyn.cli import main, synthesis
+
+    calls = []
+    original = synthesis.stream_bands
+    monkeypatch.setattr(synthesis, "stream_bands", lambda *a, **k: calls.append(1) or original(*a, **k))
+    source, out = tmp_path / "ex.png", tmp_path / "out.png"
+    write_image(source, exemplar)
+    args = ["synth", str(source), "-m", "lg", "-p", f"histogram={histogram}", "-p", "patch_size=8"]
+    code = main([*args, "--size", "40x30", "--seed", "4", "-q", "-o", str(out), "--bit-depth", "16"])
+    assert code == 0
+    assert bool(calls) is streams
+    model = texsyn.make_method("lg", histogram=histogram, patch_size=8)
+    expected = model.fit(read_image(source)).sample((30, 40), rng=4)
+    assert np.abs(read_image(out) - expected).max() <= 0.5 / 65535 + 1e-6

@@ -132,7 +132,7 @@ def synth(
     side_path = outputs.claim(sidecar_path(out_path), formats=JSON_FORMATS, what="sidecar")
 
     flow = read_flow(flow_file) if flow_file is not None else None
-    streaming = flow is None and cls.streams_rows
+    streaming = flow is None and synthesizer.streams_rows
     preparation = {"crop": exemplar_crop, "max_side": exemplar_max_side}
     check_memory_before_reading(
         synthesizer,
