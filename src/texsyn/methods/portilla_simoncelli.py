@@ -131,7 +131,7 @@ def _real_band_spectra(
         # rows of the two regressions, filled in place: the band's centred magnitudes and its
         # parents' (double precision), the band's real parts and the phase-doubled parents
         # (single precision)
-        magnitude_rows = _scratch(workspace, ("magnitude rows", s), (2 * ck, h * w), np.float64)
+        magnitude_rows = _scratch(workspace, ("magnitude rows", s), (2 * ck, h * w), np.float32)
         real_rows = _scratch(workspace, ("real rows", s), (3 * ck, h * w), np.float32)
         parent_rows(pyramid, spectra, s, magnitude_rows[ck:], real_rows[ck:])
         current, _ = centred_magnitudes(band, magnitude_rows[:ck].reshape(band.shape))

@@ -222,7 +222,8 @@ class ComplexSteerablePyramid:
         scale = (h * w) / (hc * wc)
         workers = fft_workers(spec.size * (h * w) // (hc * wc))
         batch = spec.shape[:-2]
-        columns = np.empty(batch + (h, wc + 1), dtype=complex)  # the coarse columns, then a zero one
+        dtype = np.result_type(spec.dtype, np.complex64)
+        columns = np.empty(batch + (h, wc + 1), dtype=dtype)  # the coarse columns, then a zero one
         columns[..., wc] = 0.0
         rows = _crop_runs(h, hc)
         for (fine_r, coarse_r), (next_r, _) in zip(rows, rows[1:] + [(slice(h, h), None)]):
@@ -232,9 +233,10 @@ class ComplexSteerablePyramid:
         columns = sfft.ifft(columns, axis=-2, norm="forward", overwrite_x=True, workers=workers)
         # scale by 1 / (h w) as pocketfft does (real and imaginary parts by a real factor) while
         # copying into the full array, whose other columns are the zero column's transform
-        norm = inverse_norm(h * w, np.float64)
-        out = np.empty(batch + (h, w), dtype=complex)
-        source, target = columns.view(np.float64), out.view(np.float64)
+        real = columns.real.dtype
+        norm = inverse_norm(h * w, real)
+        out = np.empty(batch + (h, w), dtype=dtype)
+        source, target = columns.view(real), out.view(real)
         previous = 0
         for fine_c, coarse_c in _crop_runs(w, wc):
             out[..., previous : fine_c.start] = columns[..., wc : wc + 1]
