@@ -59,8 +59,10 @@ def _forward(pyramid, x):
     return highpass, bands, sfft.ifft2(low).real, spectra
 
 
-def _reconstruct_level(pyramid, coarser, level, real_spectra):
-    spec = _resize(_fft(pyramid, coarser), pyramid.sizes[level + 1], pyramid.sizes[level])
+def _reconstruct_level(pyramid, coarser, level, real_spectra, single):
+    coarse = _fft(pyramid, coarser)  # issue 21: zero-padded in its single precision (before: double)
+    dtype = coarse.dtype if single else complex
+    spec = _resize(coarse, pyramid.sizes[level + 1], pyramid.sizes[level], dtype)
     spec = spec + np.sum(real_spectra * np.conj(pyramid.real_filters[level]), axis=-3)
     return sfft.ifft2(spec * pyramid.mid[level]).real
 
@@ -256,8 +258,8 @@ def _pixels(x, target):
 
 
 def _reference_iteration(x, target, pyramid, lags, single=True):
-    """One iteration of the plain loop; ``single=False``: the parents and the magnitude step in
-    double precision, as before issue 21."""
+    """One iteration of the plain loop; ``single=False``: the parents, the magnitude step and the
+    partial reconstructions in double precision, as before issue 21."""
     n_scales = pyramid.n_scales
     pixel_var = target.pixel_moments[:, 1]
     highpass, bands, residual, spectra = _forward(pyramid, x)
@@ -278,7 +280,7 @@ def _reference_iteration(x, target, pyramid, lags, single=True):
             real = band.real
         real_spectra = _fft(pyramid, real)
         spectra[s] = real_spectra * pyramid.half_planes[s]
-        image = _reconstruct_level(pyramid, image, s, real_spectra)
+        image = _reconstruct_level(pyramid, image, s, real_spectra, single)
         image = _lowpass(image, target.low_autocorr[s], target.low_skew_kurt[:, s], pixel_var, lags)
     hp_var = np.mean(highpass**2, axis=(-2, -1))
     wanted = target.highpass_variance
@@ -325,11 +327,11 @@ def test_the_iteration_gives_the_plain_loops_bytes(colour, shape, cpus, monkeypa
 
 @pytest.mark.parametrize("colour", ["grey", "rgb"])
 @pytest.mark.parametrize("shape", [(128, 128), (72, 90)])
-def test_single_precision_parents_and_magnitudes_stay_close_to_double(colour, shape):
-    # issue 21 computes the parents and the magnitude step in single precision (the loop
-    # above); before, they were double precision (``single=False``). One iteration from the
-    # same image: at most 2e-3 apart (half an 8-bit level), 4e-4 on average (a tenth of
-    # one); measured 1-9e-4 and 2e-5-2e-4 (docs/methods/portilla_simoncelli.md, "Performance")
+def test_single_precision_steps_stay_close_to_double_precision(colour, shape):
+    # issue 21 computes the parents, the magnitude step and the partial reconstructions in
+    # single precision (the loop above); before, in double precision (``single=False``). One iteration from the
+    # same image: at most 4e-3 apart (one 8-bit level), 1e-3 on average (a quarter of one);
+    # measured 7e-4-2.2e-3 and 1-4e-4 (docs/methods/portilla_simoncelli.md, "Performance")
     model = _fitted(colour)
     target = model.statistics_
     pyramid = ComplexSteerablePyramid(shape, target.n_scales, target.n_orientations, single=True)
@@ -340,8 +342,8 @@ def test_single_precision_parents_and_magnitudes_stay_close_to_double(colour, sh
     )
     fast = project_statistics(x, target, pyramid, model.lags)
     double = _reference_iteration(x, target, pyramid, model.lags, single=False)
-    assert np.abs(fast - double).max() < 2e-3
-    assert np.abs(fast - double).mean() < 4e-4
+    assert np.abs(fast - double).max() < 4e-3
+    assert np.abs(fast - double).mean() < 1e-3
 
 
 def test_the_step_solver_gives_numpy_polynomials_bits():
@@ -385,7 +387,11 @@ def test_the_fft_shortcuts_give_the_full_transforms_bytes(shape):
     plain = sfft.ifft2(_resize(wide, (hc, wc), (h, w)))
     assert pyramid.upsampled_ifft(wide, 0).tobytes() == plain.tobytes()
     assert (
-        pyramid.resize_spectrum(spec, (hc, wc), (h, w)).tobytes() == _resize(spec, (hc, wc), (h, w)).tobytes()
+        pyramid.resize_spectrum(spec, (hc, wc), (h, w)).tobytes()
+        == _resize(spec, (hc, wc), (h, w), spec.dtype).tobytes()
+    )
+    assert (
+        pyramid.resize_spectrum(wide, (hc, wc), (h, w)).tobytes() == _resize(wide, (hc, wc), (h, w)).tobytes()
     )
     full = (rng.standard_normal((2, 4, h, w)) + 1j * rng.standard_normal((2, 4, h, w))).astype(np.complex64)
     assert (

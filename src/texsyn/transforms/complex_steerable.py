@@ -189,7 +189,8 @@ class ComplexSteerablePyramid:
 
     @staticmethod
     def resize_spectrum(spec: np.ndarray, size_from, size_to) -> np.ndarray:
-        """Crop or zero-pad a full 2-D spectrum (last two axes), keeping amplitudes."""
+        """Crop or zero-pad a full 2-D spectrum (last two axes), keeping amplitudes, in its
+        precision (complex64 stays single precision since issue 21, before it was widened)."""
         scale = (size_to[0] * size_to[1]) / (size_from[0] * size_from[1])
         shape = spec.shape[:-2] + tuple(size_to)
         if size_to[0] <= size_from[0]:
@@ -202,10 +203,9 @@ class ComplexSteerablePyramid:
             return out
         rows = _crop_runs(size_to[0], size_from[0])
         cols = _crop_runs(size_to[1], size_from[1])
-        out = np.zeros(shape, dtype=complex)
+        out = np.zeros(shape, dtype=np.result_type(spec.dtype, np.complex64))  # the spectrum's precision
         for fine_r, coarse_r in rows:
             for fine_c, coarse_c in cols:
-                # the product in the spectrum's own precision, then widened (as ``spec * scale``)
                 np.multiply(spec[..., coarse_r, coarse_c], scale, out=out[..., fine_r, fine_c])
         return out
 
