@@ -231,11 +231,18 @@ def _parents(pyramid, spectra, level, single):
     dtype = spectra[level + 1].dtype if single else complex
     up = sfft.ifft2(_resize(spectra[level + 1], pyramid.sizes[level + 1], pyramid.sizes[level], dtype))
     re, im = up.real, up.imag
-    size = np.sqrt(re * re + im * im)
-    inv = np.divide(1.0, size, out=np.zeros_like(size), where=size > 0)
     doubled = np.empty(up.shape, dtype=complex)
-    doubled.real = (im * im - re * re) * inv
-    doubled.imag = 2.0 * re * im * inv
+    if single:  # issue 21: -conj(p)^2 / |p|
+        size = np.abs(up)
+        safe = np.where(size > 0, size, 1.0)
+        square = np.square(up)
+        doubled.real = -np.where(size > 0, square.real / safe, 0.0)
+        doubled.imag = np.where(size > 0, square.imag / safe, 0.0)
+    else:
+        size = np.sqrt(re * re + im * im)
+        inv = np.divide(1.0, size, out=np.zeros_like(size), where=size > 0)
+        doubled.real = (im * im - re * re) * inv
+        doubled.imag = 2.0 * re * im * inv
     c, k = up.shape[:2]
     mags = np.abs(up)
     mags = mags - mags.mean(axis=(-2, -1), keepdims=True)
