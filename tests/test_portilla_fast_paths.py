@@ -56,7 +56,7 @@ def _forward(pyramid, x):
         spectra.append(low[:, None] * pyramid.analytic_filters[s])
         bands.append(sfft.ifft2(spectra[-1]))
         low = _resize(low * pyramid.lo[s], pyramid.sizes[s], pyramid.sizes[s + 1])
-    return highpass, bands, sfft.ifft2(low).real, spectra
+    return highpass, bands, sfft.ifft2(low).real, spectra, spec * pyramid.hi0
 
 
 def _reconstruct_level(pyramid, coarser, level, real_spectra, single):
@@ -266,10 +266,11 @@ def _pixels(x, target):
 
 def _reference_iteration(x, target, pyramid, lags, single=True):
     """One iteration of the plain loop; ``single=False``: the parents, the magnitude step and the
-    partial reconstructions in double precision, as before issue 21."""
+    partial reconstructions in double precision and the high-pass residual transformed back
+    and forth, as before issue 21."""
     n_scales = pyramid.n_scales
     pixel_var = target.pixel_moments[:, 1]
-    highpass, bands, residual, spectra = _forward(pyramid, x)
+    highpass, bands, residual, spectra, hp_spec = _forward(pyramid, x)
     residual = residual - residual.mean(axis=(-2, -1), keepdims=True)
     image = sfft.ifft2(_fft(pyramid, residual) * pyramid.mid[-1]).real
     image = _lowpass(image, target.low_autocorr[n_scales], target.low_skew_kurt[:, n_scales], pixel_var, lags)
@@ -289,10 +290,20 @@ def _reference_iteration(x, target, pyramid, lags, single=True):
         spectra[s] = real_spectra * pyramid.half_planes[s]
         image = _reconstruct_level(pyramid, image, s, real_spectra, single)
         image = _lowpass(image, target.low_autocorr[s], target.low_skew_kurt[:, s], pixel_var, lags)
-    hp_var = np.mean(highpass**2, axis=(-2, -1))
     wanted = target.highpass_variance
+    if single:  # issue 21: the residual kept as its spectrum, its variance by Parseval
+        power = np.square(hp_spec.real) + np.square(hp_spec.imag)
+        hp_var = (
+            np.sum(power, axis=(-2, -1), dtype=np.float64) / float(hp_spec.shape[-1] * hp_spec.shape[-2]) ** 2
+        )
+    else:
+        hp_var = np.mean(highpass**2, axis=(-2, -1))
     shrink = np.where(hp_var > wanted, np.sqrt(wanted / np.where(hp_var > 0, hp_var, 1.0)), 1.0)
-    spec = _fft(pyramid, image) + _fft(pyramid, highpass * shrink[:, None, None]) * pyramid.hi0
+    if single:
+        gain = shrink.astype(np.float32)[:, None, None] * pyramid.hi0
+        spec = _fft(pyramid, image) + hp_spec * gain
+    else:
+        spec = _fft(pyramid, image) + _fft(pyramid, highpass * shrink[:, None, None]) * pyramid.hi0
     return _pixels(sfft.ifft2(spec).real, target)
 
 

@@ -47,6 +47,7 @@ __all__ = [
     "magnitude_real_parts",
     "parent_regression_rows",
     "real_part_of_product",
+    "highpass_shrink_factor",
     "shrink_highpass",
     "shrink_image_highpass",
 ]
@@ -437,6 +438,21 @@ def shrink_highpass(highpass: np.ndarray, target_variance: np.ndarray) -> np.nda
         hp_var > target_variance, np.sqrt(target_variance / np.where(hp_var > 0, hp_var, 1.0)), 1.0
     )
     return highpass * shrink[:, None, None]
+
+
+def highpass_shrink_factor(spectrum: np.ndarray, target_variance: np.ndarray) -> np.ndarray:
+    """The factor per channel of :func:`shrink_highpass`, from the residual's Fourier transform.
+
+    The residual's variance is ``sum |F|^2 / (H W)^2`` (Parseval; the residual has zero
+    mean): the synthesis loop keeps the residual as a spectrum (issue 21).
+    """
+    h, w = spectrum.shape[-2:]
+    power = np.square(spectrum.real)
+    power += np.square(spectrum.imag)
+    hp_var = np.sum(power, axis=(-2, -1), dtype=np.float64) / (float(h * w) ** 2)
+    return np.where(
+        hp_var > target_variance, np.sqrt(target_variance / np.where(hp_var > 0, hp_var, 1.0)), 1.0
+    )
 
 
 def shrink_image_highpass(x: np.ndarray, target: PSStatistics, pyramid) -> np.ndarray:

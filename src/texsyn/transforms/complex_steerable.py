@@ -255,17 +255,26 @@ class ComplexSteerablePyramid:
         out = self.ifft(self.resize_spectrum(spec, self.sizes[level + 1], self.sizes[level]))
         return out if np.iscomplexobj(image) else out.real
 
-    def forward(self, image: np.ndarray, *, spectra: bool = False, all_lows: bool = True):
+    def forward(
+        self,
+        image: np.ndarray,
+        *,
+        spectra: bool = False,
+        all_lows: bool = True,
+        highpass_spectrum: bool = False,
+    ):
         """``(highpass, bands, lows)`` of ``(C, H, W)`` images (and the bands' spectra).
 
         ``bands[s]`` is complex ``(C, K, h_s, w_s)``; ``lows[s]`` the real low-pass image that
         enters level ``s`` (``lows[0]`` is the image low-passed once, ``lows[-1]`` the residual).
         With ``spectra=True`` a fourth item lists the Fourier transforms of the bands; with
-        ``all_lows=False`` only the residual ``lows[-1]`` is computed (the others are None).
+        ``all_lows=False`` only the residual ``lows[-1]`` is computed (the others are None);
+        with ``highpass_spectrum=True`` the first item is the high-pass residual's Fourier
+        transform instead of the residual (:meth:`reconstruct_spectrum` takes it back).
         """
         x = np.asarray(image, dtype=np.float64)
         spec = self.fft(x)
-        highpass = self.ifft(spec * self.hi0).real
+        highpass = spec * self.hi0 if highpass_spectrum else self.ifft(spec * self.hi0).real
         low = spec * self.lo0
         bands, lows, band_spectra = [], [], []
         for s in range(self.n_scales):
@@ -325,6 +334,18 @@ class ComplexSteerablePyramid:
     def reconstruct(self, low0: np.ndarray, highpass: np.ndarray) -> np.ndarray:
         """The image from the finest partially reconstructed image and the high-pass residual."""
         return self.ifft(self.fft(low0) + self.fft(highpass) * self.hi0).real
+
+    def reconstruct_spectrum(self, low0: np.ndarray, highpass_spectrum: np.ndarray, gain) -> np.ndarray:
+        """:meth:`reconstruct` with the high-pass residual given by its Fourier transform
+        (:meth:`forward` with ``highpass_spectrum=True``), scaled by ``gain`` per channel.
+
+        The residual's transform is used as it is instead of being transformed back and
+        forth (the same numbers up to rounding).
+        """
+        gain = np.asarray(gain, dtype=self.real_dtype)[..., None, None]
+        spec = self.fft(low0)
+        spec += highpass_spectrum * (gain * self.hi0)
+        return self.ifft(spec).real
 
     def analytic(self, real_bands: np.ndarray, level: int, *, real_spectra=None):
         """Re-create the complex bands ``(..., K, h, w)`` from their real parts; returns
