@@ -9,6 +9,11 @@ image size works; auto-correlation windows shrink where a band is small. Images 
 channel-first, ``(C, H, W)``. The projections that impose these statistics are in
 :mod:`texsyn.models.portilla_projections`; the page ``docs/methods/portilla_simoncelli.md``
 maps the paper's list of statistics to the fields of :class:`PSStatistics`.
+
+Why this module is long: the parents' regressors (:func:`parent_rows`) serve both the
+statistics (double precision) and the synthesis loop (single precision, written in place
+into the regressions' rows, with its own phase doubling :func:`phase_doubled_square`; issue
+21), and are kept next to the statistics they must match.
 """
 
 from __future__ import annotations
