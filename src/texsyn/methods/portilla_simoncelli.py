@@ -37,11 +37,11 @@ from ..models.portilla import PSStatistics, parent_rows, ps_statistics, statisti
 from ..models.portilla_projections import (
     adjusted_magnitudes,
     centred_magnitudes,
+    highpass_shrink_factor,
     impose_lowpass_statistics,
     impose_pixel_statistics,
     magnitude_real_parts,
     parent_regression_rows,
-    shrink_highpass,
     shrink_image_highpass,
 )
 from ..ops.canvas import crop_to_output, extend_to_canvas, padded_canvas
@@ -81,7 +81,7 @@ def project_statistics(
     """
     n_scales = pyramid.n_scales
     pixel_var = target.pixel_moments[:, 1]
-    highpass, bands, lows = pyramid.forward(x, all_lows=False)
+    highpass, bands, lows = pyramid.forward(x, all_lows=False, highpass_spectrum=True)
     lows[-1] = lows[-1] - lows[-1].mean(axis=(-2, -1), keepdims=True)
     image = impose_lowpass_statistics(
         pyramid.lowpass_image(lows[-1]),
@@ -99,7 +99,8 @@ def project_statistics(
         image = impose_lowpass_statistics(
             image, target.low_autocorr[s], target.low_skew_kurt[:, s], pixel_var, lags
         )
-    x = pyramid.reconstruct(image, shrink_highpass(highpass, target.highpass_variance))
+    shrink = highpass_shrink_factor(highpass, target.highpass_variance)
+    x = pyramid.reconstruct_spectrum(image, highpass, shrink)
     return impose_pixel_statistics(x, target)
 
 
@@ -131,7 +132,7 @@ def _real_band_spectra(
         # rows of the two regressions, filled in place: the band's centred magnitudes and its
         # parents' (double precision), the band's real parts and the phase-doubled parents
         # (single precision)
-        magnitude_rows = _scratch(workspace, ("magnitude rows", s), (2 * ck, h * w), np.float64)
+        magnitude_rows = _scratch(workspace, ("magnitude rows", s), (2 * ck, h * w), np.float32)
         real_rows = _scratch(workspace, ("real rows", s), (3 * ck, h * w), np.float32)
         parent_rows(pyramid, spectra, s, magnitude_rows[ck:], real_rows[ck:])
         current, _ = centred_magnitudes(band, magnitude_rows[:ck].reshape(band.shape))

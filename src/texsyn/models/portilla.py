@@ -9,6 +9,11 @@ image size works; auto-correlation windows shrink where a band is small. Images 
 channel-first, ``(C, H, W)``. The projections that impose these statistics are in
 :mod:`texsyn.models.portilla_projections`; the page ``docs/methods/portilla_simoncelli.md``
 maps the paper's list of statistics to the fields of :class:`PSStatistics`.
+
+Why this module is long: the parents' regressors (:func:`parent_rows`) serve both the
+statistics (double precision) and the synthesis loop (single precision, written in place
+into the regressions' rows, with its own phase doubling :func:`phase_doubled_square`; issue
+21), and are kept next to the statistics they must match.
 """
 
 from __future__ import annotations
@@ -28,6 +33,7 @@ __all__ = [
     "parent_rows",
     "phase_doubled",
     "phase_doubled_parts",
+    "phase_doubled_square",
     "pixel_statistics",
     "ps_statistics",
     "statistics_distance",
@@ -225,6 +231,27 @@ def phase_doubled_parts(parent: np.ndarray, real_out: np.ndarray, imag_out: np.n
     np.multiply(twice, inv, out=imag_out)
 
 
+def phase_doubled_square(
+    parent: np.ndarray, size: np.ndarray, real_out: np.ndarray, imag_out: np.ndarray
+) -> None:
+    """:func:`phase_doubled_parts` as ``-conj(p)^2 / |p|``, given ``size = |p|``.
+
+    The same numbers up to rounding with fewer passes over the data: the single-precision
+    synthesis loop uses it (issue 21, ``docs/methods/portilla_simoncelli.md``,
+    "Performance"); the exemplar's statistics keep :func:`phase_doubled_parts`.
+    """
+    square = np.square(parent)
+    if size.size and size.min() > 0:
+        np.divide(square.real, size, out=real_out)
+        np.divide(square.imag, size, out=imag_out)
+    else:  # 0 where p = 0
+        real_out[...] = 0.0
+        imag_out[...] = 0.0
+        np.divide(square.real, size, out=real_out, where=size > 0)
+        np.divide(square.imag, size, out=imag_out, where=size > 0)
+    np.negative(real_out, out=real_out)
+
+
 def parent_features(pyramid: ComplexSteerablePyramid, band_spectra: list, lows: list, level: int):
     """Magnitude and real regressors of the scale above ``level``, expanded to its size.
 
@@ -281,12 +308,20 @@ def parent_rows(
     def run(bands: slice) -> None:
         up = pyramid.upsampled_ifft(flat[bands], level).reshape(bands.stop - bands.start, -1)
         mags = mags_out[bands]
-        np.abs(up, out=mags)  # phase doubling keeps the magnitude
-        mags -= mags.mean(axis=-1, keepdims=True)
+        single = up.dtype == np.complex64  # the synthesis loop
+        size = np.abs(up) if single else None
+        if size is not None:
+            np.subtract(size, size.mean(axis=-1, keepdims=True), out=mags)
+        else:
+            np.abs(up, out=mags)  # phase doubling keeps the magnitude
+            mags -= mags.mean(axis=-1, keepdims=True)
         for ci in range(bands.start // k, (bands.stop - 1) // k + 1):  # the channels in the slice
             first, stop = max(bands.start, ci * k) - ci * k, min(bands.stop, (ci + 1) * k) - ci * k
-            rows = up[ci * k + first - bands.start : ci * k + stop - bands.start]
-            phase_doubled_parts(rows, parts[ci, 0, first:stop], parts[ci, 1, first:stop])
+            at = slice(ci * k + first - bands.start, ci * k + stop - bands.start)
+            if size is not None:
+                phase_doubled_square(up[at], size[at], parts[ci, 0, first:stop], parts[ci, 1, first:stop])
+            else:
+                phase_doubled_parts(up[at], parts[ci, 0, first:stop], parts[ci, 1, first:stop])
 
     for_each_band(run, c * k, mags_out.shape[1])
 

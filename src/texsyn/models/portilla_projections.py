@@ -18,6 +18,7 @@ bytes and are kept together so that they stay so (``tests/test_portilla_fast_pat
 from __future__ import annotations
 
 import functools
+from typing import NamedTuple
 
 import numpy as np
 import scipy.fft as sfft
@@ -46,6 +47,7 @@ __all__ = [
     "magnitude_real_parts",
     "parent_regression_rows",
     "real_part_of_product",
+    "highpass_shrink_factor",
     "shrink_highpass",
     "shrink_image_highpass",
 ]
@@ -79,17 +81,11 @@ def filter_autocorrelation(x: np.ndarray, target: np.ndarray) -> np.ndarray:
     spec = sfft.rfft2(np.asarray(x, dtype=np.float32), workers=workers)
     power = np.square(spec.real)
     power += np.square(spec.imag)
-    half = _half_offsets(lag)
-    diff = half[:, None, :] - half[None, :, :]
-    summ = half[:, None, :] + half[None, :, :]
-    nonzero = np.any(half != 0, axis=1)
-    rows, cx = _autocorrelation_rows(
-        power, np.concatenate([diff[..., 0].ravel(), summ[..., 0].ravel()]), h, w
-    )
-    at = np.searchsorted(rows, diff[..., 0] % h), np.searchsorted(rows, summ[..., 0] % h)
-    a = cx[..., at[0], diff[..., 1] % w]
-    a = a + np.where(nonzero[None, :], cx[..., at[1], summ[..., 1] % w], 0.0)
-    b = target[..., half[:, 0] + lag, half[:, 1] + lag]
+    plan = _window_plan(lag, h, w)
+    cx = _autocorrelation_values(power, plan.rows, h, w)
+    a = cx[..., plan.diff_rows, plan.diff_cols]
+    a = a + np.where(plan.nonzero[None, :], cx[..., plan.sum_rows, plan.sum_cols], 0.0)
+    b = target[..., plan.half[:, 0] + lag, plan.half[:, 1] + lag]
     try:
         coef = np.linalg.solve(a, b[..., None])[..., 0]
     except np.linalg.LinAlgError:
@@ -99,46 +95,82 @@ def filter_autocorrelation(x: np.ndarray, target: np.ndarray) -> np.ndarray:
                 for ai, bi in zip(a.reshape((-1,) + a.shape[-2:]), b.reshape(-1, b.shape[-1]))
             ]
         ).reshape(b.shape)
-    gain = np.sqrt(np.abs(_symmetric_filter_spectrum(coef, half, batch, h, w).real))
+    gain = np.sqrt(np.abs(_symmetric_filter_spectrum(coef, plan, batch, h, w).real))
     spec *= gain
     return sfft.irfft2(spec, s=(h, w), workers=workers)
 
 
-def _autocorrelation_rows(
-    power: np.ndarray, lags: np.ndarray, h: int, w: int
-) -> tuple[np.ndarray, np.ndarray]:
-    """Rows ``lags % h`` of ``irfft2(power, s=(h, w)).astype(float64) / (h w)``: ``(rows, values)``.
+class _WindowPlan(NamedTuple):
+    """Index arrays of :func:`filter_autocorrelation` for one window and band size (cached)."""
+
+    half: np.ndarray  # the window's lags, one of each +/- pair (:func:`_half_offsets`)
+    nonzero: np.ndarray  # which of them are not (0, 0)
+    rows: np.ndarray  # the auto-correlation rows the system needs, sorted
+    diff_rows: np.ndarray  # positions in ``rows`` and columns of the lag differences
+    diff_cols: np.ndarray
+    sum_rows: np.ndarray  # ... and of the lag sums
+    sum_cols: np.ndarray
+    filter_rows: np.ndarray  # the rows of the symmetric filter, sorted
+    filter_pos: np.ndarray  # positions in ``filter_rows`` of the rows of +half and -half
+    filter_neg: np.ndarray
+    cols_pos: np.ndarray  # columns of +half and -half
+    cols_neg: np.ndarray
+
+
+@functools.cache
+def _window_plan(lag: int, h: int, w: int) -> _WindowPlan:
+    half = _half_offsets(lag)
+    diff = half[:, None, :] - half[None, :, :]
+    summ = half[:, None, :] + half[None, :, :]
+    rows = np.unique(np.concatenate([diff[..., 0].ravel(), summ[..., 0].ravel()]) % h)
+    rows_pos, rows_neg = half[:, 0] % h, -half[:, 0] % h
+    filter_rows = np.unique(np.concatenate([rows_pos, rows_neg]))
+    return _WindowPlan(
+        half=half,
+        nonzero=np.any(half != 0, axis=1),
+        rows=rows,
+        diff_rows=np.searchsorted(rows, diff[..., 0] % h),
+        diff_cols=diff[..., 1] % w,
+        sum_rows=np.searchsorted(rows, summ[..., 0] % h),
+        sum_cols=summ[..., 1] % w,
+        filter_rows=filter_rows,
+        filter_pos=np.searchsorted(filter_rows, rows_pos),
+        filter_neg=np.searchsorted(filter_rows, rows_neg),
+        cols_pos=half[:, 1] % w,
+        cols_neg=-half[:, 1] % w,
+    )
+
+
+def _autocorrelation_values(power: np.ndarray, rows: np.ndarray, h: int, w: int) -> np.ndarray:
+    """Rows ``rows`` (sorted, distinct) of ``irfft2(power, s=(h, w)).astype(float64) / (h w)``.
 
     ``irfft2`` transforms along the columns, then along the rows (scaled by ``1 / (h w)``, a
     product after the transform); the auto-correlation window needs a few rows, so the
     second pass runs on those only. Same bytes as the full transform.
     """
-    rows = np.unique(lags % h)
     workers = fft_workers(2 * power.size)
     columns = sfft.ifft(power + 0.0j, axis=-2, norm="forward", overwrite_x=True, workers=workers)
     values = sfft.irfft(columns[..., rows, :], n=w, axis=-1, norm="forward", workers=workers)
     values *= inverse_norm(h * w, values.dtype)
-    return rows, values.astype(np.float64) / (h * w)
+    return values.astype(np.float64) / (h * w)
 
 
 def _symmetric_filter_spectrum(
-    coef: np.ndarray, half: np.ndarray, batch: tuple, h: int, w: int
+    coef: np.ndarray, plan: _WindowPlan, batch: tuple, h: int, w: int
 ) -> np.ndarray:
-    """``rfft2`` of the single-precision ``(h, w)`` filters with ``coef`` at the lags ``+/- half``.
+    """``rfft2`` of the single-precision ``(h, w)`` filters with ``coef`` at the lags ``+/- plan.half``.
 
     The filters are zero outside the ``2 lag + 1`` rows of their window, so the first pass
     of ``rfft2`` (real transforms along the rows) runs on those rows only; the second (along
     the columns) is ``rfft2``'s own. The transform of a zero row is zero, so the result is
     ``rfft2``'s but for the sign of zeros, which the gain's ``abs`` removes.
     """
-    rows_pos, rows_neg = half[:, 0] % h, -half[:, 0] % h
-    rows = np.unique(np.concatenate([rows_pos, rows_neg]))
-    ch = np.zeros(batch + (rows.size, w), dtype=np.float32)  # the used rows only
-    ch[..., np.searchsorted(rows, rows_pos), half[:, 1] % w] = coef
-    ch[..., np.searchsorted(rows, rows_neg), -half[:, 1] % w] = coef
+    ch = np.zeros(batch + (plan.filter_rows.size, w), dtype=np.float32)  # the used rows only
+    ch[..., plan.filter_pos, plan.cols_pos] = coef
+    ch[..., plan.filter_neg, plan.cols_neg] = coef
     workers = fft_workers(int(np.prod(batch)) * h * w)
     spec = np.zeros(batch + (h, w // 2 + 1), dtype=np.complex64)
-    spec[..., rows, :] = sfft.rfft(ch, axis=-1, workers=workers)
+    spec[..., plan.filter_rows, :] = sfft.rfft(ch, axis=-1, workers=workers)
     return sfft.fft(spec, axis=-2, overwrite_x=True, workers=workers)
 
 
@@ -183,9 +215,14 @@ def adjust_cross_correlation_rows(
     rows: np.ndarray, k: int, target: np.ndarray, target_xy: np.ndarray
 ) -> np.ndarray:
     """:func:`adjust_cross_correlation` on rows: ``rows`` ``(k + m, N)`` holds ``x^T`` then
-    ``y^T`` (double precision, C order); returns the new ``x^T`` ``(k, N)``."""
+    ``y^T`` (C order); returns the new ``x^T`` ``(k, N)``.
+
+    The products with the ``N``-column rows run in the rows' precision (the synthesis gives
+    single-precision rows, ``docs/methods/portilla_simoncelli.md``, "Performance"); the
+    small ``(k + m)``-square matrices are solved in double precision.
+    """
     n = rows.shape[1]
-    gram = rows @ rows.T / n
+    gram = (rows @ rows.T).astype(np.float64) / n
     bxx, bxy, byy = gram[:k, :k], gram[:k, k:], gram[k:, k:]
     ibyy = np.linalg.pinv(byy)
     regression = ibyy @ bxy.T  # (m, k)
@@ -193,8 +230,8 @@ def adjust_cross_correlation_rows(
     desired = target - target_xy @ ibyy @ target_xy.T
     m = _sqrtm(current, inverse=True) @ _sqrtm(desired)
     # (x - y regression) m + y ibyy target_xy^T, with two products of N-column matrices
-    out = m.T @ rows[:k]
-    out += (ibyy @ target_xy.T - regression @ m).T @ rows[k:]
+    out = m.T.astype(rows.dtype) @ rows[:k]
+    out += (ibyy @ target_xy.T - regression @ m).T.astype(rows.dtype) @ rows[k:]
     return out
 
 
@@ -355,10 +392,11 @@ def magnitude_real_parts(
     """
     h, w = band.shape[-2:]
     flat, cur, new, res = (a.reshape(-1, h * w) for a in (band, current, filtered, out))
-    mean = np.asarray(means, dtype=np.float64).reshape(-1)
+    dtype = np.result_type(filtered.dtype, current.dtype, out.dtype)
+    mean = np.asarray(means, dtype=dtype).reshape(-1)
 
     def run(bands: slice) -> None:
-        ratio = np.add(new[bands], mean[bands, None], dtype=np.float64)
+        ratio = np.add(new[bands], mean[bands, None], dtype=dtype)
         np.maximum(ratio, 0.0, out=ratio)
         if cur[bands].min() > 0:
             np.divide(ratio, cur[bands], out=ratio)
@@ -400,6 +438,21 @@ def shrink_highpass(highpass: np.ndarray, target_variance: np.ndarray) -> np.nda
         hp_var > target_variance, np.sqrt(target_variance / np.where(hp_var > 0, hp_var, 1.0)), 1.0
     )
     return highpass * shrink[:, None, None]
+
+
+def highpass_shrink_factor(spectrum: np.ndarray, target_variance: np.ndarray) -> np.ndarray:
+    """The factor per channel of :func:`shrink_highpass`, from the residual's Fourier transform.
+
+    The residual's variance is ``sum |F|^2 / (H W)^2`` (Parseval; the residual has zero
+    mean): the synthesis loop keeps the residual as a spectrum (issue 21).
+    """
+    h, w = spectrum.shape[-2:]
+    power = np.square(spectrum.real)
+    power += np.square(spectrum.imag)
+    hp_var = np.sum(power, axis=(-2, -1), dtype=np.float64) / (float(h * w) ** 2)
+    return np.where(
+        hp_var > target_variance, np.sqrt(target_variance / np.where(hp_var > 0, hp_var, 1.0)), 1.0
+    )
 
 
 def shrink_image_highpass(x: np.ndarray, target: PSStatistics, pyramid) -> np.ndarray:
