@@ -411,3 +411,19 @@ def test_batched_graph_cuts_are_the_item_by_item_line(seed):
     length = items.shape[0] * step
     fast = _assemble_line(items, step, length, tau - step)
     assert fast.tobytes() == _assemble_line_sequential(items, step, length, tau - step).tobytes()
+
+
+def test_seams_cut_on_threads_are_the_serial_cuts():
+    """The seams of a stack cut in chunks on numba's threads are those cut one after the other."""
+    from texsyn.ops.graphcut import _kwatra_costs_stack, _seams_take_old_parallel, _seams_take_old_rows
+
+    rng = np.random.default_rng(5)
+    tails, heads = rng.random((2, 37, 12, 6, 3))
+    tails[::3] = np.round(tails[::3], 1)  # tied costs
+    cost_h, cost_v = _kwatra_costs_stack(tails, heads)
+    serial = np.empty((37, 12, 6), dtype=bool)
+    _seams_take_old_rows(cost_h, cost_v, serial, 0, 37)
+    for chunks in (1, 2, 3, 8):
+        parallel = np.empty_like(serial)
+        _seams_take_old_parallel(cost_h, cost_v, parallel, chunks)
+        assert np.array_equal(parallel, serial)

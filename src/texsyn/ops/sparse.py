@@ -25,7 +25,7 @@ from scipy import fft as sfft
 from scipy import linalg, ndimage
 
 from .jit import jit, prange
-from .linalg import matmul, worker_count
+from .linalg import BLOCK_COLUMNS, BLOCK_ROWS, fixed_order, matmul, worker_count
 from .patches import as_channels, extract_patches
 
 __all__ = [
@@ -225,6 +225,18 @@ def _top_eigenvector(gram: np.ndarray) -> np.ndarray:
     return vec[:, 0]
 
 
+def _small_product(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """:func:`texsyn.ops.linalg.matmul` ``(a, b)`` without its per-call set-up when the product
+    is a single tile: then ``matmul`` computes ``a @ b`` itself, so the bytes are the same.
+
+    The caller runs inside :func:`texsyn.ops.linalg.fixed_order` (K-SVD's atom loop, about
+    17 000 calls per fit, where entering and leaving the context cost as much as the product).
+    """
+    if a.shape[0] <= BLOCK_ROWS and b.shape[1] <= BLOCK_COLUMNS:
+        return a @ b
+    return matmul(a, b)
+
+
 def _rank_one(err: np.ndarray, previous: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The best rank-one approximation ``atom coeffs^T`` of ``err`` (its leading singular pair).
 
@@ -234,7 +246,7 @@ def _rank_one(err: np.ndarray, previous: np.ndarray) -> tuple[np.ndarray, np.nda
     """
     rows, cols = err.shape
     if cols <= rows:
-        gram = matmul(err.T, err)
+        gram = _small_product(err.T, err)
         vec = _top_eigenvector(gram)
         atom = err @ vec
         norm = float(np.linalg.norm(atom))
@@ -309,6 +321,7 @@ def ksvd(
 ) -> tuple[np.ndarray, np.ndarray]: ...
 
 
+@fixed_order  # the atom loop's small products call BLAS directly (_small_product)
 def ksvd(
     patches: np.ndarray,
     n_atoms: int,
@@ -400,8 +413,11 @@ def ksvd(
         # and written back as whole rows (the same values and arithmetic as by columns)
         residual_rows = np.ascontiguousarray(residual.T)
         del residual  # (memory: one residual at a time)
+        # the users of every atom at once: row n of the codes changes only at atom n's turn
+        atom_of, patch_of = np.nonzero(w)
+        bounds = np.concatenate(([0], np.cumsum(np.bincount(atom_of, minlength=n_atoms))))
         for n in range(n_atoms):
-            users = np.flatnonzero(w[n])
+            users = patch_of[bounds[n] : bounds[n + 1]]
             if users.size == 0:
                 residual = np.ascontiguousarray(residual_rows.T)
                 worst = int(np.argmax(np.einsum("ij,ij->j", residual, residual)))
