@@ -427,3 +427,20 @@ def test_seams_cut_on_threads_are_the_serial_cuts():
         parallel = np.empty_like(serial)
         _seams_take_old_parallel(cost_h, cost_v, parallel, chunks)
         assert np.array_equal(parallel, serial)
+
+
+@pytest.mark.parametrize("beta", [0.0, 1.0])
+def test_compiled_gradient_step_is_numpys_expression_byte_for_byte(beta):
+    """The fused step of image_update gives the bytes of eq. (7) written with NumPy arrays."""
+    from texsyn.ops.sparse import _gradient_step
+
+    rng = np.random.default_rng(3)
+    u, recon, projected, lowpass = rng.standard_normal((4, 24, 18, 3))
+    recon_t = np.ascontiguousarray(recon.transpose(1, 0, 2)).transpose(1, 0, 2)  # not contiguous
+    alpha, eta = 0.7, 1.0 / (2.0 * (1.0 + 0.7 + beta))
+    grad = 2.0 * (u - recon) + 2.0 * alpha * (u - projected)
+    if beta > 0:
+        grad += 2.0 * beta * lowpass
+    expected = u - eta * grad
+    fast = _gradient_step(u, recon_t, projected, lowpass if beta > 0 else None, 2.0 * alpha, 2.0 * beta, eta)
+    assert fast.tobytes() == expected.tobytes()
