@@ -268,15 +268,21 @@ _TILE = 8
 @jit()
 def _gather_error(residual_rows, users, codes, atom):
     """``E = R[:, users] + atom codes[users]^T`` (K-SVD's error without the atom), ``(L, |users|)``,
-    from the residual stored as rows ``R^T`` (one per training patch), by tiles of patches."""
+    from the residual stored as rows ``R^T`` (one per training patch), by tiles of patches
+    (their rows and codes read once per tile)."""
     n_dims = residual_rows.shape[1]
     err = np.empty((n_dims, users.size))
+    rows = np.empty(_TILE, dtype=np.int64)
+    weights = np.empty(_TILE)
     for j0 in range(0, users.size, _TILE):
-        j1 = min(j0 + _TILE, users.size)
+        width = min(_TILE, users.size - j0)
+        for t in range(width):
+            rows[t] = users[j0 + t]
+            weights[t] = codes[rows[t]]
         for i in range(n_dims):
-            for j in range(j0, j1):
-                u = users[j]
-                err[i, j] = residual_rows[u, i] + atom[i] * codes[u]
+            a = atom[i]
+            for t in range(width):
+                err[i, j0 + t] = residual_rows[rows[t], i] + a * weights[t]
     return err
 
 
@@ -284,11 +290,17 @@ def _gather_error(residual_rows, users, codes, atom):
 def _scatter_error(residual_rows, users, err, coeffs, atom):
     """``R[:, users] = E - atom coeffs^T`` on the residual stored as rows (in place)."""
     n_dims = residual_rows.shape[1]
+    rows = np.empty(_TILE, dtype=np.int64)
+    weights = np.empty(_TILE)
     for j0 in range(0, users.size, _TILE):
-        j1 = min(j0 + _TILE, users.size)
+        width = min(_TILE, users.size - j0)
+        for t in range(width):
+            rows[t] = users[j0 + t]
+            weights[t] = coeffs[j0 + t]
         for i in range(n_dims):
-            for j in range(j0, j1):
-                residual_rows[users[j], i] = err[i, j] - atom[i] * coeffs[j]
+            a = atom[i]
+            for t in range(width):
+                residual_rows[rows[t], i] = err[i, j0 + t] - a * weights[t]
 
 
 @overload
