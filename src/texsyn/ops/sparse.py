@@ -523,7 +523,7 @@ def _best_atom(corr_k, used_k, room, per_atom, limit):
     return best
 
 
-@jit()
+@jit(nogil=True)  # fit runs the exemplar codes on a second thread (models.sparse)
 def _pursuit(corr, gram_rows, n_nonzero, limit):
     """Algorithm 2 of Tartavel et al. (2013) on ``corr`` ``(K, N)`` (updated in place).
 
