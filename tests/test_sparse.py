@@ -449,22 +449,18 @@ def test_compiled_gradient_step_is_numpys_expression_byte_for_byte(beta):
 def test_compiled_kwatra_costs_are_numpys_byte_for_byte():
     """The compiled costs of a stack of overlaps (NumPy's channel sums and pairwise mean,
     replayed value by value) are the bytes of the NumPy expressions, on numba's threads too."""
-    from texsyn.ops.graphcut import (
-        _kwatra_costs_compiled,
-        _kwatra_costs_parallel,
-        _kwatra_costs_stack,
-        _numpy_sum,
-    )
+    from texsyn.ops.graphcut import _kwatra_costs_stack
+    from texsyn.ops.seam_costs import _kwatra_costs_parallel, kwatra_costs_stack, numpy_sum
 
     rng = np.random.default_rng(11)
     for n in [*range(0, 140), 257, 1000, 2898, 9000]:
         values = rng.standard_normal(n) * 10.0 ** rng.integers(-3, 3, n)
-        assert _numpy_sum(values) == np.add.reduce(values)
+        assert numpy_sum(values) == np.add.reduce(values)
     for shape in [(37, 12, 6, 3), (5, 264, 6, 3), (9, 7, 3, 1), (4, 2, 2, 3)]:
         a, b = rng.random((2, *shape))
         a[::2] = np.round(a[::2], 1)  # tied and zero differences
         expected = _kwatra_costs_stack(a, b)
-        fast = _kwatra_costs_compiled(a, b)
+        fast = kwatra_costs_stack(a, b)
         threaded = (np.empty_like(expected[0]), np.empty_like(expected[1]))
         _kwatra_costs_parallel(a, b, *threaded, 3)
         for got in (fast, threaded):
