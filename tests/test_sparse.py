@@ -411,3 +411,58 @@ def test_batched_graph_cuts_are_the_item_by_item_line(seed):
     length = items.shape[0] * step
     fast = _assemble_line(items, step, length, tau - step)
     assert fast.tobytes() == _assemble_line_sequential(items, step, length, tau - step).tobytes()
+
+
+def test_seams_cut_on_threads_are_the_serial_cuts():
+    """The seams of a stack cut in chunks on numba's threads are those cut one after the other."""
+    from texsyn.ops.graphcut import _kwatra_costs_stack, _seams_take_old_parallel, _seams_take_old_rows
+
+    rng = np.random.default_rng(5)
+    tails, heads = rng.random((2, 37, 12, 6, 3))
+    tails[::3] = np.round(tails[::3], 1)  # tied costs
+    cost_h, cost_v = _kwatra_costs_stack(tails, heads)
+    serial = np.empty((37, 12, 6), dtype=bool)
+    _seams_take_old_rows(cost_h, cost_v, serial, 0, 37)
+    for chunks in (1, 2, 3, 8):
+        parallel = np.empty_like(serial)
+        _seams_take_old_parallel(cost_h, cost_v, parallel, chunks)
+        assert np.array_equal(parallel, serial)
+
+
+@pytest.mark.parametrize("beta", [0.0, 1.0])
+def test_compiled_gradient_step_is_numpys_expression_byte_for_byte(beta):
+    """The fused step of image_update gives the bytes of eq. (7) written with NumPy arrays."""
+    from texsyn.ops.sparse import _gradient_step
+
+    rng = np.random.default_rng(3)
+    u, recon, projected, lowpass = rng.standard_normal((4, 24, 18, 3))
+    recon_t = np.ascontiguousarray(recon.transpose(1, 0, 2)).transpose(1, 0, 2)  # not contiguous
+    alpha, eta = 0.7, 1.0 / (2.0 * (1.0 + 0.7 + beta))
+    grad = 2.0 * (u - recon) + 2.0 * alpha * (u - projected)
+    if beta > 0:
+        grad += 2.0 * beta * lowpass
+    expected = u - eta * grad
+    fast = _gradient_step(u, recon_t, projected, lowpass if beta > 0 else None, 2.0 * alpha, 2.0 * beta, eta)
+    assert fast.tobytes() == expected.tobytes()
+
+
+def test_compiled_kwatra_costs_are_numpys_byte_for_byte():
+    """The compiled costs of a stack of overlaps (NumPy's channel sums and pairwise mean,
+    replayed value by value) are the bytes of the NumPy expressions, on numba's threads too."""
+    from texsyn.ops.graphcut import _kwatra_costs_stack
+    from texsyn.ops.seam_costs import _kwatra_costs_parallel, kwatra_costs_stack, numpy_sum
+
+    rng = np.random.default_rng(11)
+    for n in [*range(0, 140), 257, 1000, 2898, 9000]:
+        values = rng.standard_normal(n) * 10.0 ** rng.integers(-3, 3, n)
+        assert numpy_sum(values) == np.add.reduce(values)
+    for shape in [(37, 12, 6, 3), (5, 264, 6, 3), (9, 7, 3, 1), (4, 2, 2, 3)]:
+        a, b = rng.random((2, *shape))
+        a[::2] = np.round(a[::2], 1)  # tied and zero differences
+        expected = _kwatra_costs_stack(a, b)
+        fast = kwatra_costs_stack(a, b)
+        threaded = (np.empty_like(expected[0]), np.empty_like(expected[1]))
+        _kwatra_costs_parallel(a, b, *threaded, 3)
+        for got in (fast, threaded):
+            assert got[0].tobytes() == expected[0].tobytes()
+            assert got[1].tobytes() == expected[1].tobytes()

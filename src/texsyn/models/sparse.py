@@ -18,6 +18,7 @@ from __future__ import annotations
 import re
 import time
 import warnings
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -25,6 +26,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..ops.color import ColorPCA, colour_space
+from ..ops.linalg import worker_count
 from ..ops.patches import as_channels, extract_patches
 from ..ops.sparse import constrained_matching_pursuit, ksvd
 from ..transforms.pyramids import crop_to_multiple, zoom_out
@@ -159,50 +161,67 @@ def learn_sparse_model(
     ex = crop_to_multiple(as_channels(exemplar), 2 ** (n_scales - 1))
     rng = np.random.default_rng(seed)
     tau, s = patch_size, sparsity
-    scales = []
-    image = ex
-    for j in range(n_scales):
-        if j > 0:
-            image = zoom_out(image, 1.0)
-        patches, _ = extract_patches(image, tau)
-        count = patches.shape[0]
-        if count < 2 * (s + 1):
-            raise InputError(
-                f"exemplar {ex.shape[1]}x{ex.shape[0]} gives {count} patches of side "
-                f"patch_size={tau} at scale {j} (n_scales={n_scales}); need at least "
-                f"{2 * (s + 1)}: use fewer scales, smaller patches or a larger exemplar"
-            )
-        atoms = n_atoms
-        if count < 2 * atoms:
-            atoms = max(s + 1, count // 2)
-            warnings.warn(
-                f"scale {j} has only {count} exemplar patches; using {atoms} atoms "
-                f"instead of n_atoms={n_atoms}",
-                UserWarning,
-                stacklevel=5,
-            )
+
+    def usage(patches_t: np.ndarray, dictionary: np.ndarray) -> np.ndarray:
         start = time.perf_counter()
-        dictionary = ksvd(
-            patches.T, atoms, s, n_iterations=ksvd_iterations, max_training=ksvd_training, rng=rng
-        )
-        timings["dictionary"] += time.perf_counter() - start
-        start = time.perf_counter()
-        codes = constrained_matching_pursuit(patches.T, dictionary, s, None)
+        codes = constrained_matching_pursuit(patches_t, dictionary, s, None)
         timings["exemplar_codes"] += time.perf_counter() - start
-        space = colour_space("pca", image)  # the histogram term's axes (section 3); grey stays grey
-        coords = space.forward(image)
-        scales.append(
-            SparseScale(
-                dictionary=dictionary,
-                usage=np.count_nonzero(codes, axis=1),
-                n_patches=count,
-                sorted=tuple(np.sort(coords[..., c], axis=None) for c in range(image.shape[2])),
-                pca=space.pca,
-                mean=image.mean(axis=(0, 1)),
-                std=image.std(axis=(0, 1)),
-                image=image,
+        return np.count_nonzero(codes, axis=1)
+
+    # the exemplar codes of scale j use no randomness: they run on a second thread while
+    # the next scale's K-SVD runs on this one (the pursuit kernel releases the GIL)
+    pool = (
+        ThreadPoolExecutor(max_workers=1, thread_name_prefix="texsyn-usage") if worker_count() > 1 else None
+    )
+    learned: list[tuple[np.ndarray, Future | np.ndarray, int, np.ndarray]] = []
+    image = ex
+    try:
+        for j in range(n_scales):
+            if j > 0:
+                image = zoom_out(image, 1.0)
+            patches, _ = extract_patches(image, tau)
+            count = patches.shape[0]
+            if count < 2 * (s + 1):
+                raise InputError(
+                    f"exemplar {ex.shape[1]}x{ex.shape[0]} gives {count} patches of side "
+                    f"patch_size={tau} at scale {j} (n_scales={n_scales}); need at least "
+                    f"{2 * (s + 1)}: use fewer scales, smaller patches or a larger exemplar"
+                )
+            atoms = n_atoms
+            if count < 2 * atoms:
+                atoms = max(s + 1, count // 2)
+                warnings.warn(
+                    f"scale {j} has only {count} exemplar patches; using {atoms} atoms "
+                    f"instead of n_atoms={n_atoms}",
+                    UserWarning,
+                    stacklevel=5,
+                )
+            start = time.perf_counter()
+            dictionary = ksvd(
+                patches.T, atoms, s, n_iterations=ksvd_iterations, max_training=ksvd_training, rng=rng
             )
-        )
+            timings["dictionary"] += time.perf_counter() - start
+            used = usage(patches.T, dictionary) if pool is None else pool.submit(usage, patches.T, dictionary)
+            learned.append((dictionary, used, count, image))
+        scales = []
+        for dictionary, used, count, image in learned:
+            space = colour_space("pca", image)  # the histogram term's axes (section 3); grey stays grey
+            coords = space.forward(image)
+            scales.append(
+                SparseScale(
+                    dictionary=dictionary,
+                    usage=used.result() if isinstance(used, Future) else used,
+                    n_patches=count,
+                    sorted=tuple(np.sort(coords[..., c], axis=None) for c in range(image.shape[2])),
+                    pca=space.pca,
+                    mean=image.mean(axis=(0, 1)),
+                    std=image.std(axis=(0, 1)),
+                    image=image,
+                )
+            )
+    finally:
+        if pool is not None:
+            pool.shutdown(wait=True)
     return SparseModel(tuple(scales)), timings
 
 

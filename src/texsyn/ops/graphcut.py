@@ -14,7 +14,9 @@ import heapq
 
 import numpy as np
 
-from .jit import jit
+from .jit import jit, prange
+from .linalg import worker_count
+from .seam_costs import kwatra_costs_stack
 
 __all__ = ["kwatra_costs", "seam_take_old", "cut_value", "graphcut_reassemble"]
 
@@ -172,13 +174,41 @@ def _flood_from_left(cut_h, cut_v):
 
 
 @jit()
-def _seams_take_old(cost_h, cost_v):
-    """:func:`seam_take_old`'s cut of every overlap of a stack, from its costs ``(S, ...)``."""
-    count, h = cost_h.shape[0], cost_h.shape[1]
-    keep = np.empty((count, h, cost_h.shape[2] + 1), dtype=np.bool_)
-    for k in range(count):
+def _seams_take_old_rows(cost_h, cost_v, keep, start, stop):
+    """:func:`seam_take_old`'s cut of the overlaps ``[start, stop)`` of a stack, from its
+    costs ``(S, ...)``, into ``keep``."""
+    for k in range(start, stop):
         cut_h, cut_v = _dual_shortest_cut(cost_h[k], cost_v[k])
         keep[k] = _flood_from_left(cut_h, cut_v)
+
+
+@jit(parallel=True)
+def _seams_take_old_parallel(cost_h, cost_v, keep, n_chunks):
+    """:func:`_seams_take_old_rows` over ``n_chunks`` chunks of the stack on numba's threads."""
+    count = cost_h.shape[0]
+    size = (count + n_chunks - 1) // n_chunks
+    for c in prange(n_chunks):
+        _seams_take_old_rows(cost_h, cost_v, keep, c * size, min(count, (c + 1) * size))
+
+
+#: pairs of pixels from which the seams of a stack are cut on numba's threads (below,
+#: starting and stopping them costs more than the cuts)
+_PARALLEL_SEAM_PAIRS = 1 << 15
+
+
+def _seams_take_old(cost_h: np.ndarray, cost_v: np.ndarray) -> np.ndarray:
+    """:func:`seam_take_old`'s cut of every overlap of a stack, from its costs ``(S, ...)``.
+
+    Each seam is cut alone (its own shortest path and flood fill), so the result is the same
+    however the stack is split among threads (``docs/determinism.md``).
+    """
+    count, h = cost_h.shape[0], cost_h.shape[1]
+    keep = np.empty((count, h, cost_h.shape[2] + 1), dtype=np.bool_)
+    workers = worker_count()
+    if workers > 1 and count > 1 and cost_h.size + cost_v.size >= _PARALLEL_SEAM_PAIRS:
+        _seams_take_old_parallel(cost_h, cost_v, keep, min(workers, count))
+    else:
+        _seams_take_old_rows(cost_h, cost_v, keep, 0, count)
     return keep
 
 
@@ -280,7 +310,7 @@ def _assemble_closed_lines(items: np.ndarray, step: int, o: int) -> np.ndarray:
     if o < 2:
         joined = tails
     else:
-        cost_h, cost_v = _kwatra_costs_stack(tails, heads)
+        cost_h, cost_v = kwatra_costs_stack(tails, heads)
         keep = _seams_take_old(cost_h, cost_v)
         joined = np.where(keep[..., None], tails, heads)
     out = np.empty((lines, h, count, step, channels))

@@ -25,7 +25,7 @@ from scipy import fft as sfft
 from scipy import linalg, ndimage
 
 from .jit import jit, prange
-from .linalg import matmul, worker_count
+from .linalg import BLOCK_COLUMNS, BLOCK_ROWS, fixed_order, matmul, worker_count
 from .patches import as_channels, extract_patches
 
 __all__ = [
@@ -225,6 +225,18 @@ def _top_eigenvector(gram: np.ndarray) -> np.ndarray:
     return vec[:, 0]
 
 
+def _small_product(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """:func:`texsyn.ops.linalg.matmul` ``(a, b)`` without its per-call set-up when the product
+    is a single tile: then ``matmul`` computes ``a @ b`` itself, so the bytes are the same.
+
+    The caller runs inside :func:`texsyn.ops.linalg.fixed_order` (K-SVD's atom loop, about
+    17 000 calls per fit, where entering and leaving the context cost as much as the product).
+    """
+    if a.shape[0] <= BLOCK_ROWS and b.shape[1] <= BLOCK_COLUMNS:
+        return a @ b
+    return matmul(a, b)
+
+
 def _rank_one(err: np.ndarray, previous: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The best rank-one approximation ``atom coeffs^T`` of ``err`` (its leading singular pair).
 
@@ -234,7 +246,7 @@ def _rank_one(err: np.ndarray, previous: np.ndarray) -> tuple[np.ndarray, np.nda
     """
     rows, cols = err.shape
     if cols <= rows:
-        gram = matmul(err.T, err)
+        gram = _small_product(err.T, err)
         vec = _top_eigenvector(gram)
         atom = err @ vec
         norm = float(np.linalg.norm(atom))
@@ -256,15 +268,21 @@ _TILE = 8
 @jit()
 def _gather_error(residual_rows, users, codes, atom):
     """``E = R[:, users] + atom codes[users]^T`` (K-SVD's error without the atom), ``(L, |users|)``,
-    from the residual stored as rows ``R^T`` (one per training patch), by tiles of patches."""
+    from the residual stored as rows ``R^T`` (one per training patch), by tiles of patches
+    (their rows and codes read once per tile)."""
     n_dims = residual_rows.shape[1]
     err = np.empty((n_dims, users.size))
+    rows = np.empty(_TILE, dtype=np.int64)
+    weights = np.empty(_TILE)
     for j0 in range(0, users.size, _TILE):
-        j1 = min(j0 + _TILE, users.size)
+        width = min(_TILE, users.size - j0)
+        for t in range(width):
+            rows[t] = users[j0 + t]
+            weights[t] = codes[rows[t]]
         for i in range(n_dims):
-            for j in range(j0, j1):
-                u = users[j]
-                err[i, j] = residual_rows[u, i] + atom[i] * codes[u]
+            a = atom[i]
+            for t in range(width):
+                err[i, j0 + t] = residual_rows[rows[t], i] + a * weights[t]
     return err
 
 
@@ -272,11 +290,17 @@ def _gather_error(residual_rows, users, codes, atom):
 def _scatter_error(residual_rows, users, err, coeffs, atom):
     """``R[:, users] = E - atom coeffs^T`` on the residual stored as rows (in place)."""
     n_dims = residual_rows.shape[1]
+    rows = np.empty(_TILE, dtype=np.int64)
+    weights = np.empty(_TILE)
     for j0 in range(0, users.size, _TILE):
-        j1 = min(j0 + _TILE, users.size)
+        width = min(_TILE, users.size - j0)
+        for t in range(width):
+            rows[t] = users[j0 + t]
+            weights[t] = coeffs[j0 + t]
         for i in range(n_dims):
-            for j in range(j0, j1):
-                residual_rows[users[j], i] = err[i, j] - atom[i] * coeffs[j]
+            a = atom[i]
+            for t in range(width):
+                residual_rows[rows[t], i] = err[i, j0 + t] - a * weights[t]
 
 
 @overload
@@ -309,6 +333,7 @@ def ksvd(
 ) -> tuple[np.ndarray, np.ndarray]: ...
 
 
+@fixed_order  # the atom loop's small products call BLAS directly (_small_product)
 def ksvd(
     patches: np.ndarray,
     n_atoms: int,
@@ -400,8 +425,11 @@ def ksvd(
         # and written back as whole rows (the same values and arithmetic as by columns)
         residual_rows = np.ascontiguousarray(residual.T)
         del residual  # (memory: one residual at a time)
+        # the users of every atom at once: row n of the codes changes only at atom n's turn
+        atom_of, patch_of = np.nonzero(w)
+        bounds = np.concatenate(([0], np.cumsum(np.bincount(atom_of, minlength=n_atoms))))
         for n in range(n_atoms):
-            users = np.flatnonzero(w[n])
+            users = patch_of[bounds[n] : bounds[n + 1]]
             if users.size == 0:
                 residual = np.ascontiguousarray(residual_rows.T)
                 worst = int(np.argmax(np.einsum("ij,ij->j", residual, residual)))
@@ -495,7 +523,7 @@ def _best_atom(corr_k, used_k, room, per_atom, limit):
     return best
 
 
-@jit()
+@jit(nogil=True)  # fit runs the exemplar codes on a second thread (models.sparse)
 def _pursuit(corr, gram_rows, n_nonzero, limit):
     """Algorithm 2 of Tartavel et al. (2013) on ``corr`` ``(K, N)`` (updated in place).
 
@@ -732,12 +760,53 @@ def image_update(
     projections is a heuristic, as in the paper.
     """
     eta = 1.0 / (2.0 * (1.0 + alpha + beta))
+    recon = np.ascontiguousarray(recon, dtype=np.float64)
     for _ in range(n_steps):
-        grad = 2.0 * (u - recon) + 2.0 * alpha * (u - projector(u, rng))
+        projected = projector(u, rng)
+        lowpass = None
         if beta > 0:
-            grad += 2.0 * beta * _lowpass_apply(u - _reference_of(u, reference), box_power)
-        u = u - eta * grad
+            lowpass = _lowpass_apply(u - _reference_of(u, reference), box_power)
+        u = _gradient_step(u, recon, projected, lowpass, 2.0 * alpha, 2.0 * beta, eta)
     return u
+
+
+def _gradient_step(
+    u: np.ndarray,
+    recon: np.ndarray,
+    projected: np.ndarray,
+    lowpass: np.ndarray | None,
+    alpha2: float,
+    beta2: float,
+    eta: float,
+) -> np.ndarray:
+    """``u - eta g``, ``g = 2 (u - recon) + alpha2 (u - projected) [+ beta2 lowpass]`` (eq. 7).
+
+    One compiled pass instead of NumPy's nine array temporaries, with the same operations on
+    each pixel in the same order (no fused multiply-add), so the same bytes
+    (``tests/test_sparse.py``).
+    """
+    arrays = [np.ascontiguousarray(a, dtype=np.float64) for a in (u, recon, projected)]
+    if lowpass is None:
+        extra, beta2 = arrays[0], 0.0  # not read
+    else:
+        extra = np.ascontiguousarray(lowpass, dtype=np.float64)
+    out = np.empty(arrays[0].shape)
+    _gradient_step_flat(
+        *(a.reshape(-1) for a in arrays), extra.reshape(-1), lowpass is not None, alpha2, beta2, eta,
+        out.reshape(-1),
+    )  # fmt: skip
+    return out
+
+
+@jit()
+def _gradient_step_flat(u, recon, projected, lowpass, with_lowpass, alpha2, beta2, eta, out):
+    """:func:`_gradient_step` on flat arrays: NumPy's ``2.0 * (u - recon) + alpha2 * (u -
+    projected)``, then ``+= beta2 * lowpass``, then ``u - eta * grad``, value by value."""
+    for i in range(u.size):
+        grad = 2.0 * (u[i] - recon[i]) + alpha2 * (u[i] - projected[i])
+        if with_lowpass:
+            grad += beta2 * lowpass[i]
+        out[i] = u[i] - eta * grad
 
 
 def image_energy(
