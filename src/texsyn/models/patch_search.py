@@ -151,21 +151,30 @@ class FastSearch:
         built = {width: cls.build(windows, index, width) for width, index in indexes.items()}
         return {width: fast for width, fast in built.items() if fast is not None}
 
-    @classmethod
-    def build(cls, windows: ExemplarWindows, index: NearestPatchIndex, width: int) -> FastSearch | None:
-        """The fast search of a width whose windows are their own descriptors, if it pays.
-
-        ``None`` for wide or few windows (:data:`FAST_SEARCH_DIMENSION`,
-        :data:`FAST_SEARCH_POSITIONS`), for a BLAS whose products depend on the batch
-        (:func:`rows_independent`) and for windows with many near twins
-        (:data:`TWINNED_WINDOWS`).
-        """
+    @staticmethod
+    def eligible(windows: ExemplarWindows, width: int) -> bool:
+        """Whether ``width`` may get a fast search: its windows are their own descriptors, of at
+        most :data:`FAST_SEARCH_DIMENSION` values, over at least :data:`FAST_SEARCH_POSITIONS`
+        positions (:meth:`build` then still checks the BLAS and the twins)."""
         b, _ = windows.layout(width)
         h, w = windows.shape
-        if b != 1 or windows.dimension(width) > FAST_SEARCH_DIMENSION or h * w < FAST_SEARCH_POSITIONS:
+        return b == 1 and windows.dimension(width) <= FAST_SEARCH_DIMENSION and h * w >= FAST_SEARCH_POSITIONS
+
+    @classmethod
+    def build(
+        cls, windows: ExemplarWindows, index: NearestPatchIndex, width: int, bank: np.ndarray | None = None
+    ) -> FastSearch | None:
+        """The fast search of a width whose windows are their own descriptors, if it pays.
+
+        ``None`` for wide or few windows (:meth:`eligible`), for a BLAS whose products depend
+        on the batch (:func:`rows_independent`) and for windows with many near twins
+        (:data:`TWINNED_WINDOWS`). ``bank``: the descriptors of every position
+        (:meth:`ExemplarWindows.all_descriptors`), when the caller has them already.
+        """
+        if not cls.eligible(windows, width):
             return None
-        rows, cols = np.divmod(np.arange(h * w), w)
-        bank = windows.descriptors(rows, cols, width)
+        if bank is None:
+            bank = windows.all_descriptors(width)
         if not rows_independent(index, bank):
             return None
         fast = cls(index, bank)

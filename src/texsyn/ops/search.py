@@ -403,6 +403,73 @@ class NearestPatchIndex:
         self.candidates = int(min(max(candidates, 1), bank.shape[0]))
         self.block = int(block)
 
+    @classmethod
+    def from_parts(
+        cls,
+        fill: Callable[[int, int, np.ndarray], object],
+        n_rows: int,
+        dim: int,
+        *,
+        part_rows: int,
+        rows: Callable[[np.ndarray], np.ndarray],
+        candidates: int = 4,
+        block: int = 1024,
+    ) -> NearestPatchIndex:
+        """The index of a bank given part by part: the same index as ``NearestPatchIndex(bank)``.
+
+        ``fill(start, stop, out)`` writes the float64 rows ``bank[start:stop]`` into ``out``;
+        it is called twice per part (once for the mean, once for the centred float32 rows),
+        so that neither the float64 bank nor its centred copy is ever held whole: the
+        transient is one part of ``part_rows`` rows. The mean is the same sum as
+        ``bank.mean(axis=0)`` (NumPy adds the rows of a C-ordered array one after the other
+        along axis 0: each part continues the running sum from its first row) and every
+        other value is computed row by row, so the index is the same, byte for byte
+        (``tests/test_patch_wavelet_speed.py``).
+
+        Parameters
+        ----------
+        fill : callable
+            ``fill(start, stop, out)``, ``out`` a float64 ``(stop - start, dim)`` array.
+        n_rows, dim : int
+            Shape ``(K, D)`` of the bank.
+        part_rows : int
+            Rows per part.
+        rows : callable
+            ``rows(indices) -> (n, D) float64``: the exact bank rows for the re-ranking.
+        candidates, block : int
+            As in the constructor.
+        """
+        if n_rows < 1 or dim < 1:
+            raise ValueError(f"bank must be a non-empty (K, D) array, got shape {(n_rows, dim)}")
+        part_rows = int(min(max(part_rows, 1), n_rows))
+        # one extra row in front: the running sum, which the next part's rows are added to
+        buffer = np.empty((part_rows + 1, dim))
+        total = None
+        for start in range(0, n_rows, part_rows):
+            stop = min(n_rows, start + part_rows)
+            fill(start, stop, buffer[1 : stop - start + 1])
+            if total is None:
+                total = np.add.reduce(buffer[1 : stop - start + 1], axis=0)
+            else:
+                buffer[0] = total
+                total = np.add.reduce(buffer[: stop - start + 1], axis=0)
+        mean = np.true_divide(total, n_rows)
+        centred = np.empty((n_rows, dim), dtype=np.float32)
+        for start in range(0, n_rows, part_rows):
+            stop = min(n_rows, start + part_rows)
+            part = buffer[: stop - start]
+            fill(start, stop, part)
+            np.subtract(part, mean, out=part)
+            centred[start:stop] = part
+        index = cls.__new__(cls)
+        index.mean = mean
+        index._bank32 = centred
+        index._half_norm = 0.5 * np.einsum("kd,kd->k", centred, centred, dtype=np.float64).astype(np.float32)
+        index._rows = rows
+        index.candidates = int(min(max(candidates, 1), n_rows))
+        index.block = int(block)
+        return index
+
     def __len__(self) -> int:
         return self._bank32.shape[0]
 
