@@ -102,7 +102,7 @@ def periodic_block_means(image: np.ndarray, b: int) -> np.ndarray:
     image = np.asarray(image, dtype=np.float64)
     if b == 1:
         return image.copy()
-    return _running_means(_running_means(image, b, 0), b, 1)
+    return np.ascontiguousarray(_running_means(_running_means(image, b, 0), b, 1))
 
 
 def _window_rows(windows: ExemplarWindows, ecols: int, width: int, flat: np.ndarray) -> np.ndarray:
@@ -211,13 +211,15 @@ class ExemplarWindows(_Immutable):
         out = self.blocks(rows, cols, width)
         return out.reshape(out.shape[0], -1)
 
-    def fill_row_descriptors(self, width: int, start: int, stop: int, out: np.ndarray) -> np.ndarray:
+    def fill_row_descriptors(
+        self, width: int, start: int, stop: int, out: np.ndarray, offset: np.ndarray | None = None
+    ) -> np.ndarray:
         """Descriptors of the windows centred on every position of the image rows ``[start, stop)``.
 
-        The same values as :meth:`descriptors` of those positions in C order, written into
-        ``out`` (float64, ``((stop - start) W, D)``) and returned: the windows are strided
-        views of the rows they cover, copied once, instead of a gather through index arrays
-        (several times faster, and no index arrays).
+        The same values as :meth:`descriptors` of those positions in C order, less ``offset``
+        (``(D,)``, none by default), written into ``out`` (float64, ``((stop - start) W, D)``)
+        and returned. The windows are strided views of the rows they cover, copied once,
+        instead of a gather through index arrays (several times faster, and no index arrays).
         """
         b, m = self.layout(width)
         means = self.block_means(b)
@@ -228,7 +230,10 @@ class ExemplarWindows(_Immutable):
         c = np.arange(-(width // 2), w - width // 2 + span - 1) % pw
         covered = means[r][:, c]
         windows = sliding_window_view(covered, (span, span), axis=(0, 1))[..., ::b, ::b]  # (n, w, C, m, m)
-        np.copyto(out.reshape(stop - start, w, m, m, -1), windows.transpose(0, 1, 3, 4, 2))
+        windows = windows.transpose(0, 1, 3, 4, 2)
+        np.copyto(out.reshape(stop - start, w, m, m, -1), windows)
+        if offset is not None:
+            np.subtract(out, offset, out=out)
         return out
 
     def all_descriptors(self, width: int) -> np.ndarray:
@@ -399,11 +404,13 @@ class PatchWaveletTransform(_Immutable, PatchLifting):
         dim = self.windows.dimension(width)
         exact_rows = functools.partial(_window_rows, self.windows, w, width)
 
-        def fill(start: int, stop: int, out: np.ndarray) -> None:
-            if bank is not None:
+        def fill(start: int, stop: int, out: np.ndarray, offset: np.ndarray | None) -> None:
+            if bank is not None and offset is None:
                 np.copyto(out, bank[start:stop])
+            elif bank is not None:
+                np.subtract(bank[start:stop], offset, out=out)
             else:  # parts are whole image rows
-                self.windows.fill_row_descriptors(width, start // w, stop // w, out)
+                self.windows.fill_row_descriptors(width, start // w, stop // w, out, offset)
 
         part_rows = w * max(1, _PART_VALUES // (w * dim))
         return NearestPatchIndex.from_parts(

@@ -406,7 +406,7 @@ class NearestPatchIndex:
     @classmethod
     def from_parts(
         cls,
-        fill: Callable[[int, int, np.ndarray], object],
+        fill: Callable[[int, int, np.ndarray, np.ndarray | None], object],
         n_rows: int,
         dim: int,
         *,
@@ -417,19 +417,22 @@ class NearestPatchIndex:
     ) -> NearestPatchIndex:
         """The index of a bank given part by part: the same index as ``NearestPatchIndex(bank)``.
 
-        ``fill(start, stop, out)`` writes the float64 rows ``bank[start:stop]`` into ``out``;
-        it is called twice per part (once for the mean, once for the centred float32 rows),
-        so that neither the float64 bank nor its centred copy is ever held whole: the
-        transient is one part of ``part_rows`` rows. The mean is the same sum as
-        ``bank.mean(axis=0)`` (NumPy adds the rows of a C-ordered array one after the other
-        along axis 0: each part continues the running sum from its first row) and every
-        other value is computed row by row, so the index is the same, byte for byte
+        ``fill(start, stop, out, offset)`` writes ``bank[start:stop] - offset`` into the
+        float64 ``out`` (``offset=None``: the rows themselves). It is called twice per part:
+        without an offset, for the mean, then with the mean, for the centred rows rounded
+        to float32, so that neither the float64
+        bank nor its centred copy is ever held whole (the transient is one part of
+        ``part_rows`` rows). The mean is the same
+        sum as ``bank.mean(axis=0)`` (NumPy adds the rows of a C-ordered array one after the
+        other along axis 0: each part continues the running sum from its first row) and
+        every other value is computed row by row, so the index is the same, byte for byte
         (``tests/test_patch_wavelet_speed.py``).
 
         Parameters
         ----------
         fill : callable
-            ``fill(start, stop, out)``, ``out`` a float64 ``(stop - start, dim)`` array.
+            ``fill(start, stop, out, offset)``, ``out`` a float64 ``(stop - start, dim)``
+            array, ``offset`` a float64 ``(dim,)`` array or None.
         n_rows, dim : int
             Shape ``(K, D)`` of the bank.
         part_rows : int
@@ -444,22 +447,19 @@ class NearestPatchIndex:
         part_rows = int(min(max(part_rows, 1), n_rows))
         # one extra row in front: the running sum, which the next part's rows are added to
         buffer = np.empty((part_rows + 1, dim))
-        total = None
+        total = np.zeros(dim)
         for start in range(0, n_rows, part_rows):
             stop = min(n_rows, start + part_rows)
-            fill(start, stop, buffer[1 : stop - start + 1])
-            if total is None:
-                total = np.add.reduce(buffer[1 : stop - start + 1], axis=0)
-            else:
-                buffer[0] = total
-                total = np.add.reduce(buffer[: stop - start + 1], axis=0)
+            fill(start, stop, buffer[1 : stop - start + 1], None)
+            first = 1 if start == 0 else 0
+            buffer[0] = total
+            total = np.add.reduce(buffer[first : stop - start + 1], axis=0)
         mean = np.true_divide(total, n_rows)
         centred = np.empty((n_rows, dim), dtype=np.float32)
         for start in range(0, n_rows, part_rows):
             stop = min(n_rows, start + part_rows)
             part = buffer[: stop - start]
-            fill(start, stop, part)
-            np.subtract(part, mean, out=part)
+            fill(start, stop, part, mean)
             centred[start:stop] = part
         index = cls.__new__(cls)
         index.mean = mean
