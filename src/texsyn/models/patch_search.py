@@ -25,6 +25,7 @@ if TYPE_CHECKING:
 __all__ = [
     "FAST_SEARCH_DIMENSION",
     "FAST_SEARCH_POSITIONS",
+    "PROVEN_CHUNK_VALUES",
     "TWINNED_WINDOWS",
     "FastSearch",
     "index_answers",
@@ -39,6 +40,8 @@ FAST_SEARCH_DIMENSION = 256
 #: more than this share of the windows have a near twin
 FAST_SEARCH_POSITIONS = 1024
 TWINNED_WINDOWS = 0.01
+#: descriptor values of the glued windows a fast search makes at once
+PROVEN_CHUNK_VALUES = 2**20
 
 
 def _read_only(array: np.ndarray) -> np.ndarray:
@@ -215,7 +218,9 @@ def proven_mean_features(
     direct = coherent & isolated[np.maximum(fa, 0)]
     out[direct] = fa[direct]
     rest = np.flatnonzero(~direct)
-    chunk = max(1, 2**22 // max(1, transform.windows.dimension(width)))
+    # queries made at once (8 MiB of float64 descriptors): the answers do not depend on the
+    # cut (proven ones are the index's, the others are asked as the plain search would)
+    chunk = max(1, PROVEN_CHUNK_VALUES // max(1, transform.windows.dimension(width)))
     doubtful = []
     for start in range(0, rest.size, chunk):
         r = rest[start : start + chunk]

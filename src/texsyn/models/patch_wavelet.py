@@ -27,13 +27,14 @@ from collections.abc import Iterable
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
+from ..ops.linalg import BLOCK_ROWS
 from ..ops.patches import as_channels, wrap_seam_ratio
 from ..ops.search import NearestPatchIndex
 from ..transforms.patch_wavelet import PatchLifting, largest_width
 from .patch_embedding import PatchEmbedding, lle_embedding
 from .patch_search import FastSearch, proven_mean_features
 
-__all__ = ["ExemplarWindows", "PatchEmbedding", "PatchWaveletTransform", "lle_embedding"]
+__all__ = ["QUERY_BLOCK", "ExemplarWindows", "PatchEmbedding", "PatchWaveletTransform", "lle_embedding"]
 
 
 class _Immutable:
@@ -67,6 +68,11 @@ def _read_only(array: np.ndarray) -> np.ndarray:
     return array
 
 
+#: queries of one product of a nearest-patch index: one tile of rows of
+#: :func:`texsyn.ops.linalg.matmul`, so that the products' bytes are those of any larger
+#: multiple of it, and ``QUERY_BLOCK x H W`` float32 products stay small (16 MiB for a
+#: 128 x 128 exemplar) and are reused by the allocator from block to block
+QUERY_BLOCK = BLOCK_ROWS
 #: float64 values of the descriptors made at once while an index is built (2 MiB)
 _PART_VALUES = 2**18
 
@@ -365,7 +371,10 @@ class PatchWaveletTransform(_Immutable, PatchLifting):
         for v in index_widths:
             bank = self.windows.all_descriptors(v) if FastSearch.eligible(self.windows, v) else None
             indexes[v] = self._build_index(v, bank=bank)
-            if bank is not None and (found := FastSearch.build(self.windows, indexes[v], v, bank)) is not None:
+            if (
+                bank is not None
+                and (found := FastSearch.build(self.windows, indexes[v], v, bank)) is not None
+            ):
                 fast[v] = found
             del bank
         self.indexes = _FrozenDict(indexes)
@@ -414,7 +423,13 @@ class PatchWaveletTransform(_Immutable, PatchLifting):
 
         part_rows = w * max(1, _PART_VALUES // (w * dim))
         return NearestPatchIndex.from_parts(
-            fill, h * w, dim, part_rows=part_rows, rows=exact_rows, candidates=self.candidates
+            fill,
+            h * w,
+            dim,
+            part_rows=part_rows,
+            rows=exact_rows,
+            candidates=self.candidates,
+            block=QUERY_BLOCK,
         )
 
     def _build_embedding(self, width: int) -> PatchEmbedding:
@@ -461,12 +476,23 @@ class PatchWaveletTransform(_Immutable, PatchLifting):
         return self.windows.image[coords[..., 0], coords[..., 1]]
 
     def _nearest(self, queries_of, n: int, width: int) -> np.ndarray:
-        """Flat position of the nearest window of ``width`` to each query, in chunks."""
+        """Flat position of the nearest window of ``width`` to each query, in chunks.
+
+        The index cuts each chunk of ``2^22 / D`` queries into blocks from the chunk's start
+        (the tiles of its products, whose bytes depend on them); the queries are made and
+        asked a few whole blocks at a time (``2^20`` values), which cuts them the same way
+        with a smaller transient.
+        """
         index = self.index(width)
         out = np.empty(n, dtype=np.int64)
-        chunk = max(1, 2**22 // max(1, self.windows.dimension(width)))
+        dim = max(1, self.windows.dimension(width))
+        chunk = max(1, 2**22 // dim)
+        part = index.block * max(1, 2**20 // (index.block * dim))
         for start in range(0, n, chunk):
-            out[start : start + chunk] = index.query(queries_of(start, start + chunk))[0]
+            stop = min(n, start + chunk)
+            for a in range(start, stop, part):
+                b = min(stop, a + part)
+                out[a:b] = index.query(queries_of(a, b))[0]
         return out
 
     def mean_features(

@@ -502,6 +502,9 @@ class NearestPatchIndex:
             pick = np.where(d == best, c, np.iinfo(np.int64).max).min(axis=1)
             index[start : start + m] = pick
             distance[start : start + m] = best[:, 0]
+            # freed before the next block's products are made: one block of products at a
+            # time, and the allocator hands the same memory back (no new pages per block)
+            del gram, diff
         return index, distance
 
 
