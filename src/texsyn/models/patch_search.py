@@ -26,6 +26,7 @@ __all__ = [
     "FAST_SEARCH_DIMENSION",
     "FAST_SEARCH_POSITIONS",
     "PROVEN_CHUNK_VALUES",
+    "PROVEN_PAIRS",
     "TWINNED_WINDOWS",
     "FastSearch",
     "index_answers",
@@ -42,6 +43,8 @@ FAST_SEARCH_POSITIONS = 1024
 TWINNED_WINDOWS = 0.01
 #: descriptor values of the glued windows a fast search makes at once
 PROVEN_CHUNK_VALUES = 2**20
+#: pairs of features whose coherence a fast search checks at once
+PROVEN_PAIRS = 2**16
 
 
 def _read_only(array: np.ndarray) -> np.ndarray:
@@ -118,7 +121,9 @@ class FastSearch:
         self.candidates = index.candidates
         self.mean = index.mean
         self.search = BoundedNearestIndex(bank)
-        self.centred_max = float(np.sqrt(np.max(np.einsum("kd,kd->k", bank - self.mean, bank - self.mean))))
+        centred = bank - self.mean
+        self.centred_max = float(np.sqrt(np.max(np.einsum("kd,kd->k", centred, centred))))
+        del centred
         # no other window within the ranking band of a window itself (x = 0: the band's constant);
         # None (no fast search) when many windows have near twins, whose queries the fast
         # search could not prove (a flat or binary exemplar)
@@ -206,30 +211,35 @@ def proven_mean_features(
     ph, pw = transform.windows.period_image.shape[:2]
     shift = np.zeros(2, dtype=np.int64)
     shift[axis] = half_distance
-    a = np.asarray(first, dtype=np.int64) + shift
-    bpos = np.asarray(second, dtype=np.int64) - shift
-    ar, ac, br, bc = a[:, 0] % ph, a[:, 1] % pw, bpos[:, 0] % ph, bpos[:, 1] % pw
-    fa = np.where((ar < h) & (ac < w), ar * w + ac, -1)
-    fb = np.where((br < h) & (bc < w), br * w + bc, -1)
-    coherent = (ar == br) & (ac == bc) & (fa >= 0)
     out = np.empty(n, dtype=np.int64)
     isolated = fast.isolated
     assert isolated is not None  # a transform keeps only fast searches with isolation proofs
-    direct = coherent & isolated[np.maximum(fa, 0)]
-    out[direct] = fa[direct]
-    rest = np.flatnonzero(~direct)
-    # queries made at once (8 MiB of float64 descriptors): the answers do not depend on the
-    # cut (proven ones are the index's, the others are asked as the plain search would)
+    # pairs and queries taken a part at a time (a few MiB of positions, 8 MiB of float64
+    # descriptors): the answers do not depend on the cut (proven ones are the index's, the
+    # others are asked as the plain search would ask them, by their row among the n)
     chunk = max(1, PROVEN_CHUNK_VALUES // max(1, transform.windows.dimension(width)))
     doubtful = []
-    for start in range(0, rest.size, chunk):
-        r = rest[start : start + chunk]
-        queries = transform.windows.mean_descriptors(first[r], second[r], axis, half_distance, width)
-        best, counts = fast.query(queries, np.stack([fa[r], fb[r]], axis=1))
-        proven = fast.proven(counts)
-        out[r[proven]] = best[proven]
-        doubtful.append(r[~proven])
-    rows = np.concatenate(doubtful) if doubtful else rest
+    for lo in range(0, n, PROVEN_PAIRS):
+        hi = min(n, lo + PROVEN_PAIRS)
+        a = np.asarray(first[lo:hi], dtype=np.int64) + shift
+        bpos = np.asarray(second[lo:hi], dtype=np.int64) - shift
+        ar, ac, br, bc = a[:, 0] % ph, a[:, 1] % pw, bpos[:, 0] % ph, bpos[:, 1] % pw
+        fa = np.where((ar < h) & (ac < w), ar * w + ac, -1)
+        fb = np.where((br < h) & (bc < w), br * w + bc, -1)
+        coherent = (ar == br) & (ac == bc) & (fa >= 0)
+        direct = coherent & isolated[np.maximum(fa, 0)]
+        out[lo:hi][direct] = fa[direct]
+        rest = np.flatnonzero(~direct)
+        for start in range(0, rest.size, chunk):
+            r = rest[start : start + chunk]
+            queries = transform.windows.mean_descriptors(
+                first[lo + r], second[lo + r], axis, half_distance, width
+            )
+            best, counts = fast.query(queries, np.stack([fa[r], fb[r]], axis=1))
+            proven = fast.proven(counts)
+            out[lo + r[proven]] = best[proven]
+            doubtful.append(lo + r[~proven])
+    rows = np.concatenate(doubtful) if doubtful else np.empty(0, dtype=np.int64)
     if rows.size:
         out[rows] = index_answers(
             transform,

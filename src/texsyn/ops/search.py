@@ -396,6 +396,8 @@ class NearestPatchIndex:
         centred = np.ascontiguousarray((bank - self.mean).astype(np.float32))
         self._bank32 = centred
         self._half_norm = 0.5 * np.einsum("kd,kd->k", centred, centred, dtype=np.float64).astype(np.float32)
+        # rows given by the caller may be views of its own arrays; gathered rows are new
+        self._fresh_rows = rows is None
         if rows is None:
             exact = np.array(bank, dtype=np.float64)
             rows = exact.__getitem__
@@ -438,7 +440,8 @@ class NearestPatchIndex:
         part_rows : int
             Rows per part.
         rows : callable
-            ``rows(indices) -> (n, D) float64``: the exact bank rows for the re-ranking.
+            ``rows(indices) -> (n, D) float64``: the exact bank rows for the re-ranking, a
+            new array on every call (the query subtracts from it in place).
         candidates, block : int
             As in the constructor.
         """
@@ -466,6 +469,7 @@ class NearestPatchIndex:
         index._bank32 = centred
         index._half_norm = 0.5 * np.einsum("kd,kd->k", centred, centred, dtype=np.float64).astype(np.float32)
         index._rows = rows
+        index._fresh_rows = True
         index.candidates = int(min(max(candidates, 1), n_rows))
         index.block = int(block)
         return index
@@ -496,7 +500,11 @@ class NearestPatchIndex:
             gram = matmul((q - self.mean).astype(np.float32), self._bank32.T)
             _best_columns(gram, self._half_norm, self.candidates, cand[:m])
             c = cand[:m]
-            diff = self._rows(c.ravel()).reshape(m, self.candidates, dim) - q[:, None, :]
+            diff = self._rows(c.ravel()).reshape(m, self.candidates, dim)
+            if getattr(self, "_fresh_rows", False):  # new arrays: the difference taken in place
+                np.subtract(diff, q[:, None, :], out=diff)
+            else:
+                diff = diff - q[:, None, :]
             d = np.einsum("qkd,qkd->qk", diff, diff)
             best = d.min(axis=1, keepdims=True)
             pick = np.where(d == best, c, np.iinfo(np.int64).max).min(axis=1)
