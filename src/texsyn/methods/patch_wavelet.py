@@ -245,7 +245,11 @@ class PatchWavelet(TextureSynthesizer):
             preview=transform.image,
         )
         coords = crop_to_output(maps[0], shape)
-        return transform.image(coords), coords
+        # the displayed exemplar pixels, gathered in float32: what _as_output makes of the
+        # float64 ones (rounding is monotone and 0, 1 are float32 numbers, so clipping to
+        # [0, 1] commutes with it), without a float64 image of the output's size
+        pixels = transform.windows.image.astype(np.float32)
+        return pixels[coords[..., 0], coords[..., 1]], coords
 
     # ------------------------------------------------------------------ modification
     @staticmethod
