@@ -422,12 +422,12 @@ class NearestPatchIndex:
         ``fill(start, stop, out, offset)`` writes ``bank[start:stop] - offset`` into the
         float64 ``out`` (``offset=None``: the rows themselves). It is called twice per part:
         without an offset, for the mean, then with the mean, for the centred rows rounded
-        to float32, so that neither the float64
-        bank nor its centred copy is ever held whole (the transient is one part of
-        ``part_rows`` rows). The mean is the same
-        sum as ``bank.mean(axis=0)`` (NumPy adds the rows of a C-ordered array one after the
-        other along axis 0: each part continues the running sum from its first row) and
-        every other value is computed row by row, so the index is the same, byte for byte
+        to float32, so that neither the float64 bank nor its centred copy is ever held
+        whole (the transient is one part of ``part_rows`` rows). The mean is the same sum
+        as ``bank.mean(axis=0)``: NumPy adds the rows of a C-ordered array of two columns or
+        more one after the other along axis 0, and each part continues the running sum from
+        its first row (a single column, which NumPy sums pairwise, is taken whole). Every
+        other value is computed row by row, so the index is the same, byte for byte
         (``tests/test_patch_wavelet_speed.py``).
 
         Parameters
@@ -447,6 +447,10 @@ class NearestPatchIndex:
         """
         if n_rows < 1 or dim < 1:
             raise ValueError(f"bank must be a non-empty (K, D) array, got shape {(n_rows, dim)}")
+        if dim == 1:  # NumPy sums a single column pairwise, not row after row: take it whole
+            column = np.empty((n_rows, 1))
+            fill(0, n_rows, column, None)
+            return cls(column, candidates=candidates, block=block, rows=rows)._fresh(True)
         part_rows = int(min(max(part_rows, 1), n_rows))
         # one extra row in front: the running sum, which the next part's rows are added to
         buffer = np.empty((part_rows + 1, dim))
@@ -473,6 +477,10 @@ class NearestPatchIndex:
         index.candidates = int(min(max(candidates, 1), n_rows))
         index.block = int(block)
         return index
+
+    def _fresh(self, fresh: bool) -> NearestPatchIndex:
+        self._fresh_rows = fresh
+        return self
 
     def __len__(self) -> int:
         return self._bank32.shape[0]
