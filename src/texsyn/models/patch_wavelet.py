@@ -414,12 +414,12 @@ class PatchWaveletTransform(_Immutable, PatchLifting):
         exact_rows = functools.partial(_window_rows, self.windows, w, width)
 
         def fill(start: int, stop: int, out: np.ndarray, offset: np.ndarray | None) -> None:
-            if bank is not None and offset is None:
-                np.copyto(out, bank[start:stop])
-            elif bank is not None:
-                np.subtract(bank[start:stop], offset, out=out)
-            else:  # parts are whole image rows
+            if bank is None:  # parts are whole image rows
                 self.windows.fill_row_descriptors(width, start // w, stop // w, out, offset)
+            elif offset is None:
+                np.copyto(out, bank[start:stop])
+            else:
+                np.subtract(bank[start:stop], offset, out=out)
 
         part_rows = w * max(1, _PART_VALUES // (w * dim))
         return NearestPatchIndex.from_parts(
