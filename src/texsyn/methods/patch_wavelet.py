@@ -245,7 +245,11 @@ class PatchWavelet(TextureSynthesizer):
             preview=transform.image,
         )
         coords = crop_to_output(maps[0], shape)
-        return transform.image(coords), coords
+        # the displayed exemplar pixels, gathered in float32: what _as_output makes of the
+        # float64 ones (rounding is monotone and 0, 1 are float32 numbers, so clipping to
+        # [0, 1] commutes with it), without a float64 image of the output's size
+        pixels = transform.windows.image.astype(np.float32)
+        return pixels[coords[..., 0], coords[..., 1]], coords
 
     # ------------------------------------------------------------------ modification
     @staticmethod
@@ -427,10 +431,10 @@ class PatchWavelet(TextureSynthesizer):
         h, w, c = shape_dims(exemplar_shape)
         k = float(h * w)
         dims = self._width_dims(exemplar_shape)
-        block_means = sum(1 for width in dims if width > self.max_resolution)
+        sides = {max(1, width // self.max_resolution) for width in dims}  # block means kept per side
         terms = {
             "patch indexes": sum(4.0 * k * d + 4.0 * k for d in dims.values()),
-            "extended exemplar and block means": 32.0 * k * c * (1 + block_means) + 8.0 * k * c,
+            "extended exemplar and block means": 8.0 * k * c + 32.0 * k * c * (1 + len(sides)),
         }
         fast = self._fast_widths(exemplar_shape)
         if fast:  # float64 descriptors, their bounded index and isolation flags
@@ -443,33 +447,39 @@ class PatchWavelet(TextureSynthesizer):
         return terms
 
     def _build_bytes(self, exemplar_shape) -> float:
-        """Largest transient of the fit: float64 descriptors of an index, or an LLE embedding."""
+        """Largest transient of the fit: one part of an index's descriptors, a fast search's
+        bounded index, or an LLE embedding (the indexes are built a few rows at a time,
+        :meth:`NearestPatchIndex.from_parts <texsyn.ops.search.NearestPatchIndex.from_parts>`)."""
         h, w, _ = shape_dims(exemplar_shape)
         k = float(h * w)
         dims = self._width_dims(exemplar_shape)
-        out = max(20.0 * k * d + 16.0 * k * math.sqrt(d) + 16.0 * k for d in dims.values())
+        out = max(8.0 * max(2.0**18, w * d) + 24.0 * k for d in dims.values())
         fast = self._fast_widths(exemplar_shape).values()
-        out = max([out] + [8.0 * k * d + bounded_index_bytes(k, d)[1] for d in fast])
+        out = max([out] + [bounded_index_bytes(k, d)[1] for d in fast])
         return max(
             [out] + [self._embedding_bytes(k, dims[width])[1] for width in self._noisy_widths(exemplar_shape)]
         )
 
     def _query_bytes(self, n_queries: float, dim: int, k: float, *, glued: bool, fast: bool = False) -> float:
-        """Transient of one chunk of nearest-patch queries (descriptors, products, re-ranking).
+        """Transient of one width's nearest-patch queries (descriptors, products, re-ranking).
 
-        With ``fast`` (a width with a proven fast search), the index sees the queries the
-        fast search could not prove, one tile of rows at a time, and the fast search itself
-        holds a tile of float32 products per worker.
+        The plain search makes its queries a few blocks of 256 at a time (``2^20`` values)
+        and holds one block's float32 products and candidate rows; a fast search checks
+        ``2^16`` pairs at a time, makes ``2^20`` descriptor values of queries at a time and
+        holds a tile of float32 products per worker, and the index answers the queries it
+        cannot prove one block at a time (``models/patch_search.py``).
         """
-        chunk = min(n_queries, max(1, 2**22 // dim))
-        block = min(chunk, 256 if fast else 1024)
-        make = (16.0 if glued else 8.0) * chunk * dim
-        # a block's products are still referenced while the next block's are computed
-        grams = 2.0 if chunk > block and not fast else 1.0
-        search = 4.0 * grams * block * k + max(12.0 * block * dim, 16.0 * block * self.candidates * dim)
+        block = min(n_queries, 256.0)
+        part = min(n_queries, block * max(1, 2**20 // int(block * dim)))
+        make = (16.0 if glued else 8.0) * part * dim
+        products = 4.0 * block * k + 8.0 * block * self.candidates * dim + 12.0 * block * dim
+        search = max(make, 8.0 * part * dim + products)
         if fast:
-            search = max(search, 8.0 * 256 * 2048 + 64.0 * 256 * dim)
-        return max(make, 8.0 * chunk * dim + search) + 48.0 * chunk
+            chunk = min(n_queries, max(1, 2**20 // dim))
+            pairs = 112.0 * min(n_queries, 2.0**16)
+            bounded = 8.0 * chunk * dim + 120.0 * chunk + 8.0 * 256 * 2048 + 64.0 * 256 * dim
+            search = max(search, pairs + max(16.0 * chunk * dim, bounded))
+        return search + 8.0 * n_queries
 
     def _transform_query_bytes(self, grid: float, levels: int, exemplar_shape) -> float:
         """Largest query transient of a transform of ``grid`` samples: level ``j`` predicts at
@@ -505,12 +515,20 @@ class PatchWavelet(TextureSynthesizer):
         oh, ow = output_shape[:2]
         n = float(power_of_two_canvas((oh, ow), minimum=4, square=True)[0])
         grid = n * n
+        pixels = float(oh) * float(ow)
         levels = int(math.log2(n)) - 1
-        terms["searches (largest)"] = self._transform_query_bytes(grid, levels, exemplar_shape)
         if np.any(self.sigma_profile(levels) > 0):
             terms["random details"] = grid * self.embedding_dim * 8.0 * 2
-        terms["coordinate maps"] = 64.0 * grid
-        terms["output image"] = 8.0 * c * float(oh) * float(ow) + output_bytes(c, output_shape)
+        # every level's map is kept (16 bytes a sample, 16/3 for the coarser ones together);
+        # the finest step holds the half-resolution map and its neighbours (16 bytes a
+        # sample) while it searches, then their positions (20 more), and the result the
+        # float32 pixels, their clipped copy and the int32 source map (docs/memory.md)
+        terms["coordinate maps"] = 22.0 * grid
+        terms["searches, or the output image (larger)"] = max(
+            self._transform_query_bytes(grid, levels, exemplar_shape),
+            20.0 * grid,
+            output_bytes(c, output_shape) + 8.0 * pixels,
+        )
         return terms
 
     def estimate_modify_memory(

@@ -25,6 +25,8 @@ if TYPE_CHECKING:
 __all__ = [
     "FAST_SEARCH_DIMENSION",
     "FAST_SEARCH_POSITIONS",
+    "PROVEN_CHUNK_VALUES",
+    "PROVEN_PAIRS",
     "TWINNED_WINDOWS",
     "FastSearch",
     "index_answers",
@@ -39,6 +41,10 @@ FAST_SEARCH_DIMENSION = 256
 #: more than this share of the windows have a near twin
 FAST_SEARCH_POSITIONS = 1024
 TWINNED_WINDOWS = 0.01
+#: descriptor values of the glued windows a fast search makes at once
+PROVEN_CHUNK_VALUES = 2**20
+#: pairs of features whose coherence a fast search checks at once
+PROVEN_PAIRS = 2**16
 
 
 def _read_only(array: np.ndarray) -> np.ndarray:
@@ -115,7 +121,9 @@ class FastSearch:
         self.candidates = index.candidates
         self.mean = index.mean
         self.search = BoundedNearestIndex(bank)
-        self.centred_max = float(np.sqrt(np.max(np.einsum("kd,kd->k", bank - self.mean, bank - self.mean))))
+        centred = bank - self.mean
+        self.centred_max = float(np.sqrt(np.max(np.einsum("kd,kd->k", centred, centred))))
+        del centred
         # no other window within the ranking band of a window itself (x = 0: the band's constant);
         # None (no fast search) when many windows have near twins, whose queries the fast
         # search could not prove (a flat or binary exemplar)
@@ -151,21 +159,30 @@ class FastSearch:
         built = {width: cls.build(windows, index, width) for width, index in indexes.items()}
         return {width: fast for width, fast in built.items() if fast is not None}
 
-    @classmethod
-    def build(cls, windows: ExemplarWindows, index: NearestPatchIndex, width: int) -> FastSearch | None:
-        """The fast search of a width whose windows are their own descriptors, if it pays.
-
-        ``None`` for wide or few windows (:data:`FAST_SEARCH_DIMENSION`,
-        :data:`FAST_SEARCH_POSITIONS`), for a BLAS whose products depend on the batch
-        (:func:`rows_independent`) and for windows with many near twins
-        (:data:`TWINNED_WINDOWS`).
-        """
+    @staticmethod
+    def eligible(windows: ExemplarWindows, width: int) -> bool:
+        """Whether ``width`` may get a fast search: its windows are their own descriptors, of at
+        most :data:`FAST_SEARCH_DIMENSION` values, over at least :data:`FAST_SEARCH_POSITIONS`
+        positions (:meth:`build` then still checks the BLAS and the twins)."""
         b, _ = windows.layout(width)
         h, w = windows.shape
-        if b != 1 or windows.dimension(width) > FAST_SEARCH_DIMENSION or h * w < FAST_SEARCH_POSITIONS:
+        return b == 1 and windows.dimension(width) <= FAST_SEARCH_DIMENSION and h * w >= FAST_SEARCH_POSITIONS
+
+    @classmethod
+    def build(
+        cls, windows: ExemplarWindows, index: NearestPatchIndex, width: int, bank: np.ndarray | None = None
+    ) -> FastSearch | None:
+        """The fast search of a width whose windows are their own descriptors, if it pays.
+
+        ``None`` for wide or few windows (:meth:`eligible`), for a BLAS whose products depend
+        on the batch (:func:`rows_independent`) and for windows with many near twins
+        (:data:`TWINNED_WINDOWS`). ``bank``: the descriptors of every position
+        (:meth:`ExemplarWindows.all_descriptors`), when the caller has them already.
+        """
+        if not cls.eligible(windows, width):
             return None
-        rows, cols = np.divmod(np.arange(h * w), w)
-        bank = windows.descriptors(rows, cols, width)
+        if bank is None:
+            bank = windows.all_descriptors(width)
         if not rows_independent(index, bank):
             return None
         fast = cls(index, bank)
@@ -194,28 +211,35 @@ def proven_mean_features(
     ph, pw = transform.windows.period_image.shape[:2]
     shift = np.zeros(2, dtype=np.int64)
     shift[axis] = half_distance
-    a = np.asarray(first, dtype=np.int64) + shift
-    bpos = np.asarray(second, dtype=np.int64) - shift
-    ar, ac, br, bc = a[:, 0] % ph, a[:, 1] % pw, bpos[:, 0] % ph, bpos[:, 1] % pw
-    fa = np.where((ar < h) & (ac < w), ar * w + ac, -1)
-    fb = np.where((br < h) & (bc < w), br * w + bc, -1)
-    coherent = (ar == br) & (ac == bc) & (fa >= 0)
     out = np.empty(n, dtype=np.int64)
     isolated = fast.isolated
     assert isolated is not None  # a transform keeps only fast searches with isolation proofs
-    direct = coherent & isolated[np.maximum(fa, 0)]
-    out[direct] = fa[direct]
-    rest = np.flatnonzero(~direct)
-    chunk = max(1, 2**22 // max(1, transform.windows.dimension(width)))
+    # pairs and queries taken a part at a time (a few MiB of positions, 8 MiB of float64
+    # descriptors): the answers do not depend on the cut (proven ones are the index's, the
+    # others are asked as the plain search would ask them, by their row among the n)
+    chunk = max(1, PROVEN_CHUNK_VALUES // max(1, transform.windows.dimension(width)))
     doubtful = []
-    for start in range(0, rest.size, chunk):
-        r = rest[start : start + chunk]
-        queries = transform.windows.mean_descriptors(first[r], second[r], axis, half_distance, width)
-        best, counts = fast.query(queries, np.stack([fa[r], fb[r]], axis=1))
-        proven = fast.proven(counts)
-        out[r[proven]] = best[proven]
-        doubtful.append(r[~proven])
-    rows = np.concatenate(doubtful) if doubtful else rest
+    for lo in range(0, n, PROVEN_PAIRS):
+        hi = min(n, lo + PROVEN_PAIRS)
+        a = np.asarray(first[lo:hi], dtype=np.int64) + shift
+        bpos = np.asarray(second[lo:hi], dtype=np.int64) - shift
+        ar, ac, br, bc = a[:, 0] % ph, a[:, 1] % pw, bpos[:, 0] % ph, bpos[:, 1] % pw
+        fa = np.where((ar < h) & (ac < w), ar * w + ac, -1)
+        fb = np.where((br < h) & (bc < w), br * w + bc, -1)
+        coherent = (ar == br) & (ac == bc) & (fa >= 0)
+        direct = coherent & isolated[np.maximum(fa, 0)]
+        out[lo:hi][direct] = fa[direct]
+        rest = np.flatnonzero(~direct)
+        for start in range(0, rest.size, chunk):
+            r = rest[start : start + chunk]
+            queries = transform.windows.mean_descriptors(
+                first[lo + r], second[lo + r], axis, half_distance, width
+            )
+            best, counts = fast.query(queries, np.stack([fa[r], fb[r]], axis=1))
+            proven = fast.proven(counts)
+            out[lo + r[proven]] = best[proven]
+            doubtful.append(lo + r[~proven])
+    rows = np.concatenate(doubtful) if doubtful else np.empty(0, dtype=np.int64)
     if rows.size:
         out[rows] = index_answers(
             transform,

@@ -25,15 +25,16 @@ import warnings
 from collections.abc import Iterable
 
 import numpy as np
-from scipy.ndimage import uniform_filter
+from numpy.lib.stride_tricks import sliding_window_view
 
+from ..ops.linalg import BLOCK_ROWS
 from ..ops.patches import as_channels, wrap_seam_ratio
 from ..ops.search import NearestPatchIndex
 from ..transforms.patch_wavelet import PatchLifting, largest_width
 from .patch_embedding import PatchEmbedding, lle_embedding
 from .patch_search import FastSearch, proven_mean_features
 
-__all__ = ["ExemplarWindows", "PatchEmbedding", "PatchWaveletTransform", "lle_embedding"]
+__all__ = ["QUERY_BLOCK", "ExemplarWindows", "PatchEmbedding", "PatchWaveletTransform", "lle_embedding"]
 
 
 class _Immutable:
@@ -65,6 +66,49 @@ class _FrozenDict(dict):
 def _read_only(array: np.ndarray) -> np.ndarray:
     array.setflags(write=False)
     return array
+
+
+#: queries of one product of a nearest-patch index: one tile of rows of
+#: :func:`texsyn.ops.linalg.matmul`, so that the products' bytes are those of any larger
+#: multiple of it, and ``QUERY_BLOCK x H W`` float32 products stay small (16 MiB for a
+#: 128 x 128 exemplar) and are reused by the allocator from block to block
+QUERY_BLOCK = BLOCK_ROWS
+#: float64 values of the descriptors made at once while an index is built (2 MiB)
+_PART_VALUES = 2**18
+
+
+def _running_means(image: np.ndarray, b: int, axis: int) -> np.ndarray:
+    """Means of ``image`` over ``[i, i + b)`` along ``axis``, periodic, for every ``i``.
+
+    A running sum: the first window summed term by term, then one entry in and one out per
+    step (a sequential cumulative sum), each divided by ``b`` at the end; these are the
+    very operations of SciPy's ``uniform_filter1d(mode='wrap', origin=-(b // 2))``, so the
+    values are the same to the bit (``tests/test_patch_wavelet_speed.py``), without
+    importing ``scipy.ndimage`` (about 0.2 s of start-up, ``docs/performance.md``).
+    """
+    x = np.moveaxis(image, axis, 0)
+    n = x.shape[0]
+    extended = np.take(x, np.arange(n + b - 1), axis=0, mode="wrap")
+    steps = np.empty_like(x)
+    first = np.zeros(x.shape[1:])
+    for k in range(b):
+        first += extended[k]
+    steps[0] = first
+    np.subtract(extended[b : b + n - 1], extended[: n - 1], out=steps[1:])
+    sums = np.cumsum(steps, axis=0, out=steps)
+    return np.moveaxis(np.divide(sums, b, out=sums), 0, axis)
+
+
+def periodic_block_means(image: np.ndarray, b: int) -> np.ndarray:
+    """Mean of the ``b x b`` block starting at every position of a periodic ``(H, W, C)`` image.
+
+    Rows first, then columns (the order of ``scipy.ndimage.uniform_filter(image,
+    size=(b, b, 1), mode='wrap', origin=(-(b // 2), -(b // 2), 0))``, whose values these are).
+    """
+    image = np.asarray(image, dtype=np.float64)
+    if b == 1:
+        return image.copy()
+    return np.ascontiguousarray(_running_means(_running_means(image, b, 0), b, 1))
 
 
 def _window_rows(windows: ExemplarWindows, ecols: int, width: int, flat: np.ndarray) -> np.ndarray:
@@ -137,9 +181,7 @@ class ExemplarWindows(_Immutable):
 
     def _compute_means(self, b: int) -> np.ndarray:
         # mean over [y, y+b) x [x, x+b) of the periodic image, for every (y, x)
-        return uniform_filter(
-            self.period_image, size=(b, b, 1), mode="wrap", origin=(-(b // 2), -(b // 2), 0)
-        )
+        return periodic_block_means(self.period_image, b)
 
     def block_means(self, b: int) -> np.ndarray:
         """Means of the ``b x b`` blocks starting at every position of one period."""
@@ -174,6 +216,36 @@ class ExemplarWindows(_Immutable):
         """Descriptors ``(n, D)`` of the windows of ``width`` centred on ``(rows, cols)``."""
         out = self.blocks(rows, cols, width)
         return out.reshape(out.shape[0], -1)
+
+    def fill_row_descriptors(
+        self, width: int, start: int, stop: int, out: np.ndarray, offset: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Descriptors of the windows centred on every position of the image rows ``[start, stop)``.
+
+        The same values as :meth:`descriptors` of those positions in C order, less ``offset``
+        (``(D,)``, none by default), written into ``out`` (float64, ``((stop - start) W, D)``)
+        and returned. The windows are strided views of the rows they cover, copied once,
+        instead of a gather through index arrays (several times faster, and no index arrays).
+        """
+        b, m = self.layout(width)
+        means = self.block_means(b)
+        ph, pw = means.shape[:2]
+        w = self.shape[1]
+        span = b * (m - 1) + 1  # block starts covered by one window, along each axis
+        r = np.arange(start - width // 2, stop - width // 2 + span - 1) % ph
+        c = np.arange(-(width // 2), w - width // 2 + span - 1) % pw
+        covered = means[r][:, c]
+        windows = sliding_window_view(covered, (span, span), axis=(0, 1))[..., ::b, ::b]  # (n, w, C, m, m)
+        windows = windows.transpose(0, 1, 3, 4, 2)
+        np.copyto(out.reshape(stop - start, w, m, m, -1), windows)
+        if offset is not None:
+            np.subtract(out, offset, out=out)
+        return out
+
+    def all_descriptors(self, width: int) -> np.ndarray:
+        """Descriptors ``(H W, D)`` of the windows centred on every position, in C order."""
+        h, w = self.shape
+        return self.fill_row_descriptors(width, 0, h, np.empty((h * w, self.dimension(width))))
 
     def mean_descriptors(
         self, first: np.ndarray, second: np.ndarray, axis: int, half_distance: int, width: int
@@ -291,8 +363,22 @@ class PatchWaveletTransform(_Immutable, PatchLifting):
         self.windows = ExemplarWindows(
             ex, exemplar_boundary, max_resolution=max_resolution, widths=index_widths + embedded
         )
-        self.indexes = _FrozenDict({v: self._build_index(v) for v in index_widths})
-        self.fast = _FrozenDict(FastSearch.for_widths(self.windows, self.indexes))
+        # width by width, each fast search next to its index: the float64 descriptors a fast
+        # search keeps are built once and shared with its index, and no width's build
+        # transients overlap another's (docs/memory.md)
+        indexes: dict[int, NearestPatchIndex] = {}
+        fast: dict[int, FastSearch] = {}
+        for v in index_widths:
+            bank = self.windows.all_descriptors(v) if FastSearch.eligible(self.windows, v) else None
+            indexes[v] = self._build_index(v, bank=bank)
+            if (
+                bank is not None
+                and (found := FastSearch.build(self.windows, indexes[v], v, bank)) is not None
+            ):
+                fast[v] = found
+            del bank
+        self.indexes = _FrozenDict(indexes)
+        self.fast = _FrozenDict(fast)
         self.embeddings = _FrozenDict({v: self._build_embedding(v) for v in embedded})
         self._seal()
 
@@ -315,18 +401,42 @@ class PatchWaveletTransform(_Immutable, PatchLifting):
         rows, cols = np.divmod(np.arange(h * w), w)
         return rows, cols
 
-    def _build_index(self, width: int) -> NearestPatchIndex:
-        rows, cols = self.all_positions()
-        bank = self.windows.descriptors(rows, cols, width)
-        exact_rows = functools.partial(_window_rows, self.windows, self.exemplar_shape[1], width)
-        return NearestPatchIndex(bank, candidates=self.candidates, rows=exact_rows)
+    def _build_index(self, width: int, bank: np.ndarray | None = None) -> NearestPatchIndex:
+        """The nearest-patch index of ``width``, built a few image rows at a time.
+
+        ``bank``: the descriptors of every position, when the caller has them; otherwise they
+        are made part by part (:meth:`ExemplarWindows.fill_row_descriptors`), so that the
+        float64 descriptors are never held whole (:meth:`NearestPatchIndex.from_parts`: the
+        same index as from the whole bank).
+        """
+        h, w = self.exemplar_shape
+        dim = self.windows.dimension(width)
+        exact_rows = functools.partial(_window_rows, self.windows, w, width)
+
+        def fill(start: int, stop: int, out: np.ndarray, offset: np.ndarray | None) -> None:
+            if bank is None:  # parts are whole image rows
+                self.windows.fill_row_descriptors(width, start // w, stop // w, out, offset)
+            elif offset is None:
+                np.copyto(out, bank[start:stop])
+            else:
+                np.subtract(bank[start:stop], offset, out=out)
+
+        part_rows = w * max(1, _PART_VALUES // (w * dim))
+        return NearestPatchIndex.from_parts(
+            fill,
+            h * w,
+            dim,
+            part_rows=part_rows,
+            rows=exact_rows,
+            candidates=self.candidates,
+            block=QUERY_BLOCK,
+        )
 
     def _build_embedding(self, width: int) -> PatchEmbedding:
         from scipy.spatial import cKDTree
 
-        rows, cols = self.all_positions()
         Y = lle_embedding(
-            self.windows.descriptors(rows, cols, width),
+            self.windows.all_descriptors(width),
             self.exemplar_shape,
             n_components=self.embedding_dim,
             n_neighbors=self.lle_neighbors,
@@ -366,12 +476,23 @@ class PatchWaveletTransform(_Immutable, PatchLifting):
         return self.windows.image[coords[..., 0], coords[..., 1]]
 
     def _nearest(self, queries_of, n: int, width: int) -> np.ndarray:
-        """Flat position of the nearest window of ``width`` to each query, in chunks."""
+        """Flat position of the nearest window of ``width`` to each query, in chunks.
+
+        The index cuts each chunk of ``2^22 / D`` queries into blocks from the chunk's start
+        (the tiles of its products, whose bytes depend on them); the queries are made and
+        asked a few whole blocks at a time (``2^20`` values), which cuts them the same way
+        with a smaller transient.
+        """
         index = self.index(width)
         out = np.empty(n, dtype=np.int64)
-        chunk = max(1, 2**22 // max(1, self.windows.dimension(width)))
+        dim = max(1, self.windows.dimension(width))
+        chunk = max(1, 2**22 // dim)
+        part = index.block * max(1, 2**20 // (index.block * dim))
         for start in range(0, n, chunk):
-            out[start : start + chunk] = index.query(queries_of(start, start + chunk))[0]
+            stop = min(n, start + chunk)
+            for a in range(start, stop, part):
+                b = min(stop, a + part)
+                out[a:b] = index.query(queries_of(a, b))[0]
         return out
 
     def mean_features(

@@ -396,12 +396,91 @@ class NearestPatchIndex:
         centred = np.ascontiguousarray((bank - self.mean).astype(np.float32))
         self._bank32 = centred
         self._half_norm = 0.5 * np.einsum("kd,kd->k", centred, centred, dtype=np.float64).astype(np.float32)
+        # rows given by the caller may be views of its own arrays; gathered rows are new
+        self._fresh_rows = rows is None
         if rows is None:
             exact = np.array(bank, dtype=np.float64)
             rows = exact.__getitem__
         self._rows = rows
         self.candidates = int(min(max(candidates, 1), bank.shape[0]))
         self.block = int(block)
+
+    @classmethod
+    def from_parts(
+        cls,
+        fill: Callable[[int, int, np.ndarray, np.ndarray | None], object],
+        n_rows: int,
+        dim: int,
+        *,
+        part_rows: int,
+        rows: Callable[[np.ndarray], np.ndarray],
+        candidates: int = 4,
+        block: int = 1024,
+    ) -> NearestPatchIndex:
+        """The index of a bank given part by part: the same index as ``NearestPatchIndex(bank)``.
+
+        ``fill(start, stop, out, offset)`` writes ``bank[start:stop] - offset`` into the
+        float64 ``out`` (``offset=None``: the rows themselves). It is called twice per part:
+        without an offset, for the mean, then with the mean, for the centred rows rounded
+        to float32, so that neither the float64 bank nor its centred copy is ever held
+        whole (the transient is one part of ``part_rows`` rows). The mean is the same sum
+        as ``bank.mean(axis=0)``: NumPy adds the rows of a C-ordered array of two columns or
+        more one after the other along axis 0, and each part continues the running sum from
+        its first row (a single column, which NumPy sums pairwise, is taken whole). Every
+        other value is computed row by row, so the index is the same, byte for byte
+        (``tests/test_patch_wavelet_speed.py``).
+
+        Parameters
+        ----------
+        fill : callable
+            ``fill(start, stop, out, offset)``, ``out`` a float64 ``(stop - start, dim)``
+            array, ``offset`` a float64 ``(dim,)`` array or None.
+        n_rows, dim : int
+            Shape ``(K, D)`` of the bank.
+        part_rows : int
+            Rows per part.
+        rows : callable
+            ``rows(indices) -> (n, D) float64``: the exact bank rows for the re-ranking, a
+            new array on every call (the query subtracts from it in place).
+        candidates, block : int
+            As in the constructor.
+        """
+        if n_rows < 1 or dim < 1:
+            raise ValueError(f"bank must be a non-empty (K, D) array, got shape {(n_rows, dim)}")
+        if dim == 1:  # NumPy sums a single column pairwise, not row after row: take it whole
+            column = np.empty((n_rows, 1))
+            fill(0, n_rows, column, None)
+            return cls(column, candidates=candidates, block=block, rows=rows)._fresh(True)
+        part_rows = int(min(max(part_rows, 1), n_rows))
+        # one extra row in front: the running sum, which the next part's rows are added to
+        buffer = np.empty((part_rows + 1, dim))
+        total = np.zeros(dim)
+        for start in range(0, n_rows, part_rows):
+            stop = min(n_rows, start + part_rows)
+            fill(start, stop, buffer[1 : stop - start + 1], None)
+            first = 1 if start == 0 else 0
+            buffer[0] = total
+            total = np.add.reduce(buffer[first : stop - start + 1], axis=0)
+        mean = np.true_divide(total, n_rows)
+        centred = np.empty((n_rows, dim), dtype=np.float32)
+        for start in range(0, n_rows, part_rows):
+            stop = min(n_rows, start + part_rows)
+            part = buffer[: stop - start]
+            fill(start, stop, part, mean)
+            centred[start:stop] = part
+        index = cls.__new__(cls)
+        index.mean = mean
+        index._bank32 = centred
+        index._half_norm = 0.5 * np.einsum("kd,kd->k", centred, centred, dtype=np.float64).astype(np.float32)
+        index._rows = rows
+        index._fresh_rows = True
+        index.candidates = int(min(max(candidates, 1), n_rows))
+        index.block = int(block)
+        return index
+
+    def _fresh(self, fresh: bool) -> NearestPatchIndex:
+        self._fresh_rows = fresh
+        return self
 
     def __len__(self) -> int:
         return self._bank32.shape[0]
@@ -429,12 +508,19 @@ class NearestPatchIndex:
             gram = matmul((q - self.mean).astype(np.float32), self._bank32.T)
             _best_columns(gram, self._half_norm, self.candidates, cand[:m])
             c = cand[:m]
-            diff = self._rows(c.ravel()).reshape(m, self.candidates, dim) - q[:, None, :]
+            diff = self._rows(c.ravel()).reshape(m, self.candidates, dim)
+            if getattr(self, "_fresh_rows", False):  # new arrays: the difference taken in place
+                np.subtract(diff, q[:, None, :], out=diff)
+            else:
+                diff = diff - q[:, None, :]
             d = np.einsum("qkd,qkd->qk", diff, diff)
             best = d.min(axis=1, keepdims=True)
             pick = np.where(d == best, c, np.iinfo(np.int64).max).min(axis=1)
             index[start : start + m] = pick
             distance[start : start + m] = best[:, 0]
+            # freed before the next block's products are made: one block of products at a
+            # time, and the allocator hands the same memory back (no new pages per block)
+            del gram, diff
         return index, distance
 
 

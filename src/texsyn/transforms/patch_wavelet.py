@@ -120,7 +120,7 @@ class PatchLifting:
 
     def positions(self, flat: np.ndarray) -> np.ndarray:
         """Exemplar positions ``(..., 2)`` of flat indices (int64)."""
-        return np.stack(np.divmod(flat, self.exemplar_shape[1]), axis=-1).astype(np.int64)
+        return np.stack(np.divmod(flat, self.exemplar_shape[1]), axis=-1).astype(np.int64, copy=False)
 
     def predict(self, even: np.ndarray, axis: int, level: int, boundary: str) -> np.ndarray:
         """Association-field mean of every even sample and its next even neighbour along ``axis``."""

@@ -13,7 +13,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.ndimage import gaussian_filter
 
 from .coefficients import Coefficients
 
@@ -149,7 +148,9 @@ class PatchWaveletCoefficients(Coefficients):
         if not 0.0 <= ratio <= 1.0:
             raise ValueError(f"ratio must be in [0, 1], got {ratio!r}")
         energy = self.detail_energy(per_level=per_level)
-        if smoothing > 0:
+        if smoothing > 0:  # scipy.ndimage imported here: synthesis never needs it (start-up)
+            from scipy.ndimage import gaussian_filter
+
             energy = gaussian_filter(energy, float(smoothing), mode="reflect")
         h, w = energy.shape if valid is None else (int(valid[0]), int(valid[1]))
         inside = energy[:h, :w]
