@@ -130,7 +130,12 @@ def _sort_ties(values: np.ndarray, keys: np.ndarray, order: np.ndarray) -> None:
 
 
 def match_sorted_rows(
-    values: np.ndarray, targets_sorted: np.ndarray, *, rows: np.ndarray | None = None
+    values: np.ndarray,
+    targets_sorted: np.ndarray,
+    *,
+    rows: np.ndarray | None = None,
+    out: np.ndarray | None = None,
+    keys: np.ndarray | None = None,
 ) -> np.ndarray:
     """:func:`match_sorted` for many rows at once: row ``i`` of ``values`` gets the values of
     row ``i`` of ``targets_sorted`` in the order of its ranks (ties broken by position).
@@ -147,6 +152,12 @@ def match_sorted_rows(
     rows : ndarray of int, shape (B,), optional
         Row ``i`` of ``values`` takes the targets of row ``rows[i]`` (no reordered copy of
         the targets is made).
+    out : ndarray of float64, shape (B, N), C-contiguous, optional
+        Where to write the result; it may be ``values`` itself (matched in place).
+    keys : ndarray of uint64, shape (B, N), C-contiguous, optional
+        Scratch space for the sort keys. An iterative method passes the same ``out`` and
+        ``keys`` at every step: reused pages, instead of fresh ones the kernel has to fault
+        in (``docs/performance.md``, "Memory reuse"); the result is the same.
     """
     x = np.ascontiguousarray(values, dtype=np.float64)
     t = np.ascontiguousarray(targets_sorted, dtype=np.float64)
@@ -159,11 +170,13 @@ def match_sorted_rows(
         raise ValueError(f"values {x.shape} and targets {t.shape} must be equal (B, N) arrays")
     if index.size and (index.min() < 0 or index.max() >= t.shape[0]):
         raise ValueError(f"rows must index the {t.shape[0]} target rows")
+    if out is not None and (out.shape != x.shape or out.dtype != np.float64 or not out.flags.c_contiguous):
+        raise ValueError(f"out must be a C-contiguous float64 array of shape {x.shape}")
     if compiled_ranks(x.size):
-        keys, shift = sorted_keys(x)
-        return scatter_by_key(x, keys, shift, t, index)
+        sorted_rows, shift = sorted_keys(x, keys)
+        return scatter_by_key(x, sorted_rows, shift, t, index, out)
     order = _argsort_rows(x)
-    return _scatter_by_rank_numpy(x, order, t, index)
+    return _scatter_by_rank_numpy(x, order, t, index, out)
 
 
 def _argsort_rows(x: np.ndarray) -> np.ndarray:
@@ -177,7 +190,7 @@ def _argsort_rows(x: np.ndarray) -> np.ndarray:
 
 
 def _scatter_by_rank_numpy(
-    x: np.ndarray, order: np.ndarray, targets: np.ndarray, rows: np.ndarray
+    x: np.ndarray, order: np.ndarray, targets: np.ndarray, rows: np.ndarray, out: np.ndarray | None = None
 ) -> np.ndarray:
     """``out[i, order[i, k]] = targets[rows[i], k]`` after the runs of equal values (rare in
     continuous data) are put in position order by one ``lexsort`` over their elements only:
@@ -194,7 +207,7 @@ def _scatter_by_rank_numpy(
         positions = order[r, k]
         order = order.copy()
         order[r, k] = positions[np.lexsort((positions, np.cumsum(starts)))]
-    out = np.empty_like(x)
+    out = np.empty_like(x) if out is None else out
     np.put_along_axis(out, order, targets[rows], axis=1)
     return out
 

@@ -43,16 +43,18 @@ def compiled_ranks(size: int) -> bool:
     return "numba" in sys.modules or size >= COMPILED_SCATTER_VALUES
 
 
-def sorted_keys(x: np.ndarray) -> tuple[np.ndarray, int]:
+def sorted_keys(x: np.ndarray, out: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """Every row's packed sort keys (:func:`_packed_keys_rows`), sorted, and the position bits.
 
-    ``x`` is a C-contiguous ``(B, N)`` float64 array.
+    ``x`` is a C-contiguous ``(B, N)`` float64 array; ``out``, a C-contiguous ``(B, N)``
+    uint64 array the keys are written to (an iterative method reuses it from one call to the
+    next instead of faulting in fresh pages, ``docs/performance.md``).
 
     One ``uint64`` sort replaces an ``argsort``: about 2.5 times faster (NumPy's vectorised
     integer sort), rows split over texsyn's worker threads.
     """
     shift = max(1, int(x.shape[1] - 1).bit_length())
-    keys = _packed_keys(x, x.view(np.uint64), shift)
+    keys = _packed_keys(x, x.view(np.uint64), shift, out)
     workers = min(worker_count(), keys.shape[0])
     if workers <= 1 or keys.size < 1 << 15:
         keys.sort(axis=-1)
@@ -186,9 +188,11 @@ def _on_threads(x: np.ndarray) -> bool:
     return x.shape[0] > 1 and x.size >= PARALLEL_RANK_VALUES and worker_count() > 1
 
 
-def _packed_keys(x: np.ndarray, bits: np.ndarray, shift: int) -> np.ndarray:
-    """The packed sort keys of every row (:func:`_packed_keys_rows`)."""
-    keys = np.empty(x.shape, dtype=np.uint64)
+def _packed_keys(x: np.ndarray, bits: np.ndarray, shift: int, out: np.ndarray | None = None) -> np.ndarray:
+    """The packed sort keys of every row (:func:`_packed_keys_rows`), in ``out`` when given."""
+    keys = np.empty(x.shape, dtype=np.uint64) if out is None else out
+    if keys.shape != x.shape or keys.dtype != np.uint64 or not keys.flags.c_contiguous:
+        raise ValueError(f"keys must be a C-contiguous uint64 array of shape {x.shape}")
     if _on_threads(x):
         _packed_keys_parallel(x, bits, shift, keys)
     else:
@@ -196,8 +200,11 @@ def _packed_keys(x: np.ndarray, bits: np.ndarray, shift: int) -> np.ndarray:
     return keys
 
 
-def scatter_by_key(x, keys, shift: int, targets, rows) -> np.ndarray:
+def scatter_by_key(x, keys, shift: int, targets, rows, out: np.ndarray | None = None) -> np.ndarray:
     """``out[i, order[k]] = targets[rows[i], k]`` with every row's canonical order (:func:`_scatter_rows`).
+
+    ``out`` may be ``x`` itself: each row is read (only where its keys tie) before it is
+    written, and rows are independent.
 
     Parameters
     ----------
@@ -208,9 +215,11 @@ def scatter_by_key(x, keys, shift: int, targets, rows) -> np.ndarray:
     targets : ndarray, shape (T, N)
         Ascending values; row ``i`` of the result takes those of row ``rows[i]``.
     rows : ndarray of int64, shape (B,)
+    out : ndarray of float64, shape (B, N), C-contiguous, optional
+        Where to write the result (a new array by default).
     """
     bits = x.view(np.uint64)
-    out = np.empty_like(x)
+    out = np.empty_like(x) if out is None else out
     if _on_threads(x):
         _scatter_parallel(x, bits, keys, shift, targets, rows, out)
     else:
