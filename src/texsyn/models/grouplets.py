@@ -17,9 +17,10 @@ from typing import Any, cast
 
 import numpy as np
 
-from ..ops import hist_target, luma, match_sorted_rows, periodic_smooth_decomposition
+from ..ops import luma, match_sorted_rows, periodic_smooth_decomposition
 from ..ops.color import ColorPCA, ColourSpace, colour_space
 from ..ops.flow import association_fields, orient_field, structure_tensor_orientation
+from ..ops.histogram import hist_target_rows
 from ..ops.progress import Reporter
 from ..transforms.grouplets import WaveletGroupletTransform
 
@@ -248,10 +249,7 @@ class GroupletModel(metaclass=_LearnsFromExemplar):
     def targets(self, n: int) -> HistogramTargets:
         """Sorted target values of every band and channel for ``n`` pixels (computed, not kept)."""
         bands = self.band_values.reshape(-1, self.band_values.shape[-1])
-        return HistogramTargets(
-            np.stack([hist_target(n, row, presorted=True) for row in bands]),
-            np.stack([hist_target(n, row, presorted=True) for row in self.pixel_values]),
-        )
+        return HistogramTargets(hist_target_rows(n, bands), hist_target_rows(n, self.pixel_values))
 
     def noise(self, shape: tuple[int, int], rng: np.random.Generator) -> np.ndarray:
         """White noise ``(H, W, C)`` with the exemplar's mean and deviation per channel."""
