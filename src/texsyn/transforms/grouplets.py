@@ -17,6 +17,7 @@ in speed (``docs/methods/grouplets.md``).
 
 from __future__ import annotations
 
+import math
 import warnings
 
 import numpy as np
@@ -171,7 +172,10 @@ class WaveletGroupletTransform:
         """
         x = np.asarray(image, dtype=np.float64)
         planes = x[None] if x.ndim == 2 else np.moveaxis(x, -1, 0)  # (C, H, W)
-        bands = self.pyramid.forward_planes(planes)  # (J+1, C, H, W)
+        shape = (self.pyramid.levels + 1, planes.shape[0]) + self.shape
+        bands = self.pyramid.forward_planes(
+            planes, out=None if work is None else work[0, : math.prod(shape)].reshape(shape)
+        )  # (J+1, C, H, W)
         flat = bands.reshape((bands.shape[0] * bands.shape[1],) + self.shape)
         coefficients = self.grouplets.forward(
             flat,
@@ -205,7 +209,8 @@ class WaveletGroupletTransform:
 
     def work_buffer(self, channels: int) -> np.ndarray:
         """Scratch space of :meth:`analyse` and :meth:`synthesise` for ``channels`` channels:
-        ``(3, (J+1) C H W)`` (the grouplet scan's two residuals, and the synthesised bands)."""
+        ``(3, (J+1) C H W)``: the pyramid's bands (analysis) or the grouplet frame's
+        synthesis, and the grouplet scan's two residuals."""
         return np.empty((3, (self.pyramid.levels + 1) * int(channels) * self.size))
 
     def forward(self, image: np.ndarray) -> np.ndarray:
