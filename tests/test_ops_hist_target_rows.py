@@ -28,3 +28,34 @@ def test_large_rows_on_the_worker_threads_are_the_same_bytes():
 def test_rejects_an_empty_reference():
     with pytest.raises(ValueError):
         hist_target_rows(4, np.empty((2, 0)))
+
+
+@pytest.mark.parametrize("compiled", [False, True])
+def test_match_sorted_rows_in_place_with_reused_keys_is_the_same_bytes(compiled, monkeypatch):
+    """Issue 20: grouplets match their bands in place (``out=values``) with a reused key
+    buffer; ties, runs of values equal in their high bits and the NumPy path included."""
+    from texsyn.ops import histogram, ranks
+    from texsyn.ops.histogram import match_sorted_rows
+
+    if compiled:
+        _ot_targets.compiled()
+    else:
+        monkeypatch.setattr(histogram, "compiled_ranks", lambda size: False)
+    rng = np.random.default_rng(4)
+    x = rng.standard_normal((6, 2000))
+    x[1] = 1.0 + rng.integers(0, 40, 2000) * 2.0**-52  # equal high bits, distinct values
+    x[2, :60] = 0.0
+    x[3, ::3] = -0.0
+    targets = np.sort(rng.standard_normal((8, 2000)), axis=1)
+    rows = np.array([7, 0, 3, 3, 1, 2])
+    expected = match_sorted_rows(x, targets, rows=rows)
+    stable = np.argsort(x, axis=1, kind="stable")
+    reference = np.empty_like(x)
+    np.put_along_axis(reference, stable, targets[rows], axis=1)
+    assert expected.tobytes() == reference.tobytes()
+    keys = np.empty(x.shape, dtype=np.uint64)
+    for _ in range(2):  # the key buffer holds the last call's keys
+        values = x.copy()
+        assert match_sorted_rows(values, targets, rows=rows, out=values, keys=keys) is values
+        assert values.tobytes() == expected.tobytes()
+    assert ranks.PARALLEL_RANK_VALUES > x.size  # one thread here; test_determinism runs the threads

@@ -139,29 +139,59 @@ def _canonical_row(x, bits, keys, shift, order):
 
 
 @jit()
-def _scatter_rows(x, bits, keys, shift, targets, rows, out, start, stop):
-    """``out[i, order[k]] = targets[rows[i], k]`` for rows ``[start, stop)``, with each row's
-    canonical order (:func:`_canonical_row`): the values in rank order, equal values by position."""
-    n = x.shape[1]
+def _canonical_keys(x, bits, keys, shift):
+    """Put a row's sorted keys in the canonical order of :func:`_canonical_row`, in place.
+
+    The keys of each run with equal high bits are in position order; a run whose values are
+    not all equal is reordered, stably, by full value. Afterwards the keys' positions (low
+    bits) are the row's positions by value, then by position, with no separate order array
+    (which, for a large row, would be fresh pages at every call).
+    """
+    n = keys.size
     s = np.uint64(shift)
     mask = (np.uint64(1) << s) - np.uint64(1)
-    order = np.empty(n, dtype=np.int64)
+    k = 0
+    while k < n - 1:
+        high = keys[k] >> s
+        if (keys[k + 1] >> s) != high:
+            k += 1
+            continue
+        end = k + 2  # a run of equal high bits
+        while end < n and (keys[end] >> s) == high:
+            end += 1
+        first = x[np.int64(keys[k] & mask)]
+        mixed = False
+        for j in range(k + 1, end):
+            value = x[np.int64(keys[j] & mask)]
+            if value != first and not (first != first and value != value):
+                mixed = True
+        if mixed:  # a stable sort of the run (in position order) by full value
+            full = np.empty(end - k, dtype=np.uint64)
+            for j in range(k, end):
+                position = np.int64(keys[j] & mask)
+                full[j - k] = _ordered_bits(x[position], bits[position])
+            by_value = np.argsort(full, kind="mergesort")
+            run = keys[k:end].copy()
+            for j in range(end - k):
+                keys[k + j] = run[by_value[j]]
+        k = end
+
+
+@jit()
+def _scatter_rows(x, bits, keys, shift, targets, rows, out, start, stop):
+    """``out[i, order[k]] = targets[rows[i], k]`` for rows ``[start, stop)``, with each row's
+    canonical order (:func:`_canonical_keys`, which rewrites the keys): the values in rank
+    order, equal values by position. Each row of ``x`` is read before ``out``'s row is
+    written, so ``out`` may be ``x``."""
+    n = x.shape[1]
+    mask = (np.uint64(1) << np.uint64(shift)) - np.uint64(1)
     for i in range(start, stop):
         key = keys[i]
+        _canonical_keys(x[i], bits[i], key, shift)
         target = targets[rows[i]]
         row = out[i]
-        clean = True  # no two keys share their high bits: the keys' positions are the order
-        for k in range(n - 1):
-            if (key[k + 1] >> s) == (key[k] >> s):
-                clean = False
-                break
-        if clean:
-            for k in range(n):
-                row[np.int64(key[k] & mask)] = target[k]
-        else:
-            _canonical_row(x[i], bits[i], key, shift, order)
-            for k in range(n):
-                row[order[k]] = target[k]
+        for k in range(n):
+            row[np.int64(key[k] & mask)] = target[k]
 
 
 @jit(parallel=True)
@@ -202,6 +232,8 @@ def _packed_keys(x: np.ndarray, bits: np.ndarray, shift: int, out: np.ndarray | 
 
 def scatter_by_key(x, keys, shift: int, targets, rows, out: np.ndarray | None = None) -> np.ndarray:
     """``out[i, order[k]] = targets[rows[i], k]`` with every row's canonical order (:func:`_scatter_rows`).
+
+    The keys are scratch: the positions of runs of equal high bits are reordered in place.
 
     ``out`` may be ``x`` itself: each row is read (only where its keys tie) before it is
     written, and rows are independent.
