@@ -187,11 +187,13 @@ class LaplacianTightFrame:
         if out is None and step >= x.shape[0]:
             return self._forward_chunk(x, None)
         result = np.empty(shape) if out is None else out
-        product = None
+        product: np.ndarray | None = None
         for b0 in range(0, x.shape[0], step):
             chunk = x[b0 : b0 + step]
-            if product is None or product.shape[1] != chunk.shape[0]:
-                product = np.empty((shape[0], chunk.shape[0]) + self.filters.shape[1:], dtype=np.complex128)
+            if product is None or len(product[0]) != len(chunk):
+                product = np.empty(
+                    (len(self.filters), len(chunk)) + self.filters[0].shape, dtype=np.complex128
+                )
             result[:, b0 : b0 + step] = self._forward_chunk(chunk, product)
         return result
 
