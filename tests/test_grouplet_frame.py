@@ -203,15 +203,18 @@ def test_interleaved_blocks_give_the_bytes_of_the_one_image_scan(normalized):
     if normalized:
         expected = expected / frame.scales[:, None]
     out = np.empty_like(expected)
-    _forward_block(images, frame.orders, *frame._merges, scales, normalized, out, 0, 5)
+    work = frame.work_buffer(5)
+    _forward_block(images, frame.orders, *frame._merges, scales, normalized, out, work, 0, 5)
     assert out.tobytes() == expected.tobytes()
-    threaded, _ = _forward_rows(images, frame.orders, *frame._merges, scales, normalized, 3)
+    threaded = np.empty_like(expected)
+    _forward_rows(images, frame.orders, *frame._merges, scales, normalized, threaded, work, 3)
     assert threaded.tobytes() == expected.tobytes()
     coefficients = expected + 0.1 * rng.standard_normal(expected.shape)  # off the range too
     plain = coefficients * frame.scales[:, None] if normalized else coefficients
     reference = np.stack([reference_inverse(plain[:, b], frame.orders, *frame._merges) for b in range(5)])
     back = np.empty((5, n))
-    _inverse_block(coefficients, frame.orders, *frame._merges, scales, normalized, back, 0, 5)
+    _inverse_block(coefficients, frame.orders, *frame._merges, scales, normalized, back, work, 0, 5)
     assert back.tobytes() == reference.tobytes()
-    threaded_back, _ = _inverse_rows(coefficients, frame.orders, *frame._merges, scales, normalized, 2)
+    threaded_back = np.empty((5, n))
+    _inverse_rows(coefficients, frame.orders, *frame._merges, scales, normalized, threaded_back, work, 2)
     assert threaded_back.tobytes() == reference.tobytes()

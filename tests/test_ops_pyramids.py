@@ -74,3 +74,27 @@ def test_steerable_pyramid_bands_are_oriented():
 def test_steerable_pyramid_rejects_tiny_images():
     with pytest.raises(ValueError, match="too small"):
         SteerablePyramid((10, 40), n_scales=4)
+
+
+@pytest.mark.parametrize("per_call", [1, 2, 64])
+def test_laplacian_planes_a_few_at_a_time_are_the_bytes_of_one_call(monkeypatch, per_call):
+    """Issue 20: the tight frame transforms large stacks a few images per FFT call (bounded
+    temporaries) and into a reused ``out``; the bytes are those of one call on the stack."""
+    import scipy.fft as sfft
+
+    from texsyn.transforms import pyramids
+    from texsyn.transforms.pyramids import LaplacianTightFrame
+
+    frame = LaplacianTightFrame((24, 20), 3)
+    planes = np.random.default_rng(5).standard_normal((5, 24, 20))
+    spectrum = sfft.rfft2(planes, axes=(1, 2))
+    bands = sfft.irfft2(frame.filters[:, None] * spectrum[None], s=(24, 20), axes=(2, 3))
+    spectra = sfft.rfft2(bands, axes=(2, 3))
+    images = sfft.irfft2(np.sum(frame.filters[:, None] * spectra, axis=0), s=(24, 20), axes=(1, 2))
+    monkeypatch.setattr(pyramids, "SPECTRUM_VALUES", per_call * frame.filters.size)
+    out = np.empty_like(bands)
+    assert frame.forward_planes(planes, out=out) is out
+    assert out.tobytes() == bands.tobytes()
+    assert frame.forward_planes(planes).tobytes() == bands.tobytes()
+    assert frame.inverse_planes(bands).tobytes() == images.tobytes()
+    np.testing.assert_allclose(images, planes, atol=1e-12)

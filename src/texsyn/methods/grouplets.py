@@ -284,9 +284,10 @@ class Grouplets(TextureSynthesizer):
         model: GroupletModel = self.model_
         if n_iterations == 0:
             return channels
+        buffers = model.buffers(transform)
         return alternate_projections(
             channels,
-            lambda f, _k: model.project_once(f, transform, targets),
+            lambda f, _k: model.project_once(f, transform, targets, buffers),
             n_iterations,
             reporter=reporter,
             preview=preview,

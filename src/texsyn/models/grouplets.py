@@ -17,13 +17,14 @@ from typing import Any, cast
 
 import numpy as np
 
-from ..ops import hist_target, luma, match_sorted_rows, periodic_smooth_decomposition
+from ..ops import luma, match_sorted_rows, periodic_smooth_decomposition
 from ..ops.color import ColorPCA, ColourSpace, colour_space
 from ..ops.flow import association_fields, orient_field, structure_tensor_orientation
+from ..ops.histogram import hist_target_rows
 from ..ops.progress import Reporter
 from ..transforms.grouplets import WaveletGroupletTransform
 
-__all__ = ["GroupletModel", "HistogramTargets"]
+__all__ = ["GroupletModel", "HistogramTargets", "ProjectionBuffers"]
 
 
 @dataclass(frozen=True)
@@ -54,6 +55,30 @@ class HistogramTargets:
         """Deprecated: round 1's ``targets(n)`` was the tuple ``(bands, pixels)``."""
         _warn_targets_tuple()
         return (self.bands, self.pixels)[index]
+
+
+@dataclass(frozen=True)
+class ProjectionBuffers:
+    """Arrays that every pass of Table 1 writes, allocated once per synthesis and reused.
+
+    A 256x256 colour pass writes about 100 MB of coefficients, sort keys and scan residuals;
+    fresh arrays would be fresh pages, which the kernel faults in one by one (about a third
+    of the time of a pass, ``docs/methods/grouplets.md``, "Performance"). The buffers hold
+    no state from one pass to the next: the results are the same bytes.
+
+    Attributes
+    ----------
+    coefficients : ndarray of float64, shape (L+1, J+1, C, H, W)
+        The analysis, then (in place) the matched coefficients.
+    keys : ndarray of uint64, shape ((L+1)(J+1)C, H*W)
+        The sort keys of the bands (:func:`texsyn.ops.match_sorted_rows`).
+    work : ndarray of float64
+        The transform's scratch space (:meth:`WaveletGroupletTransform.work_buffer`).
+    """
+
+    coefficients: np.ndarray
+    keys: np.ndarray
+    work: np.ndarray
 
 
 def _warn_targets_tuple() -> None:
@@ -224,10 +249,7 @@ class GroupletModel(metaclass=_LearnsFromExemplar):
     def targets(self, n: int) -> HistogramTargets:
         """Sorted target values of every band and channel for ``n`` pixels (computed, not kept)."""
         bands = self.band_values.reshape(-1, self.band_values.shape[-1])
-        return HistogramTargets(
-            np.stack([hist_target(n, row, presorted=True) for row in bands]),
-            np.stack([hist_target(n, row, presorted=True) for row in self.pixel_values]),
-        )
+        return HistogramTargets(hist_target_rows(n, bands), hist_target_rows(n, self.pixel_values))
 
     def noise(self, shape: tuple[int, int], rng: np.random.Generator) -> np.ndarray:
         """White noise ``(H, W, C)`` with the exemplar's mean and deviation per channel."""
@@ -251,24 +273,44 @@ class GroupletModel(metaclass=_LearnsFromExemplar):
         pixels = (self.targets(n) if targets is None else targets).pixels
         return match_sorted_rows(image.reshape(n, self.channels).T, pixels).T.reshape(image.shape)
 
+    def buffers(self, transform: WaveletGroupletTransform) -> ProjectionBuffers:
+        """The arrays :meth:`project_once` reuses from one pass to the next with ``transform``."""
+        levels = transform.grouplets.levels + 1
+        bands = transform.pyramid.levels + 1
+        shape = (levels, bands, self.channels) + transform.shape
+        return ProjectionBuffers(
+            coefficients=np.empty(shape),
+            keys=np.empty((levels * bands * self.channels, transform.size), dtype=np.uint64),
+            work=transform.work_buffer(self.channels),
+        )
+
     def project_once(
-        self, image: np.ndarray, transform: WaveletGroupletTransform, targets: HistogramTargets
+        self,
+        image: np.ndarray,
+        transform: WaveletGroupletTransform,
+        targets: HistogramTargets,
+        buffers: ProjectionBuffers | None = None,
     ) -> np.ndarray:
         """One pass of Table 1, steps 2-5: analyse, match the bands, synthesise, match the pixels.
 
         Step 6 of the paper goes back to step 3; the coefficients must be recomputed from the
         new image, so a pass starts again from the analysis (step 2). The bands are matched
         in the transform's own layout (:meth:`WaveletGroupletTransform.analyse`), each to its
-        row of ``targets.bands``, without reordering copies.
+        row of ``targets.bands``, in place, without reordering copies. ``buffers`` (from
+        :meth:`buffers`) are reused by every pass; the result is the same without them.
         """
-        coefficients = transform.analyse(image)  # (L+1, J+1, C, H, W)
+        out, keys, work = (
+            (None, None, None) if buffers is None else (buffers.coefficients, buffers.keys, buffers.work)
+        )
+        coefficients = transform.analyse(image, out=out, work=work)  # (L+1, J+1, C, H, W)
         levels, bands, channels = coefficients.shape[:3]
         # row (l, j, c) of the layout is row (j, l, c) of the targets
         order = np.arange(bands * levels * channels).reshape(bands, levels, channels)
         rows = np.transpose(order, (1, 0, 2)).ravel()
         n = coefficients.shape[-1] * coefficients.shape[-2]
-        matched = match_sorted_rows(coefficients.reshape(-1, n), targets.bands, rows=rows)
-        return self.match_pixels(transform.synthesise(matched.reshape(coefficients.shape)), targets)
+        flat = coefficients.reshape(-1, n)
+        match_sorted_rows(flat, targets.bands, rows=rows, out=flat, keys=keys)
+        return self.match_pixels(transform.synthesise(coefficients, work=work), targets)
 
     def to_image(self, channels: np.ndarray) -> np.ndarray:
         """``(H, W, C)`` model channels (principal-axis coordinates) to an ``(H, W[, 3])`` image."""

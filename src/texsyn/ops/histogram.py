@@ -9,15 +9,20 @@ target of each rank is the barycentre of the reference mass the monotone plan se
 
 from __future__ import annotations
 
+import math
+import sys
+
 import numpy as np
 
 from .color import ColorPCA
+from .jit import jit
 from .linalg import parallel_map, worker_count
 from .ranks import compiled_ranks, order_by_key, scatter_by_key, sorted_keys
 
 __all__ = [
     "HistogramMatcher",
     "hist_target",
+    "hist_target_rows",
     "match_sorted",
     "match_sorted_rows",
     "match_histogram",
@@ -66,6 +71,51 @@ def hist_target(n: int, reference: np.ndarray, *, method: str = "ot", presorted:
 
     edges = integral(np.arange(n + 1) / n)
     return n * np.diff(edges)
+
+
+def hist_target_rows(n: int, references_sorted: np.ndarray) -> np.ndarray:
+    """:func:`hist_target` (``method='ot'``, ``presorted=True``) of every row of ``references_sorted``.
+
+    ``(R, N_y)`` ascending rows give ``(R, n)`` ascending targets, each row the bytes of
+    :func:`hist_target` of that row. Once numba is loaded (``docs/performance.md``,
+    "Start-up") the rows are computed by a compiled kernel, without NumPy's temporaries:
+    about ten times faster at 256x256 and more for larger outputs, whose temporaries no
+    longer fit the caches (the same expressions in the same order, so the same bytes).
+    """
+    ys = np.ascontiguousarray(np.atleast_2d(references_sorted), dtype=np.float64)
+    rows, ny = ys.shape
+    if ny == 0:
+        raise ValueError("reference must contain at least one value")
+    if n == ny or "numba" not in sys.modules:
+        return np.stack([hist_target(n, row, presorted=True) for row in ys]) if rows else np.empty((0, n))
+    cums = np.empty((rows, ny + 1))
+    cums[:, 0] = 0.0
+    np.cumsum(ys, axis=1, out=cums[:, 1:])  # each row's sequential sum, as np.cumsum of the row
+    cums /= ny
+    out = np.empty((rows, n))
+    chunks = (
+        np.array_split(np.arange(rows), min(rows, worker_count()))
+        if rows * n >= 1 << 20
+        else [np.arange(rows)]
+    )
+    parallel_map(lambda r: _ot_targets(ys, cums, n, out, r[0], r[-1] + 1), [c for c in chunks if c.size])
+    return out
+
+
+@jit(nogil=True)
+def _ot_targets(ys, cums, n, out, start, stop):
+    """Rows ``start .. stop - 1`` of :func:`hist_target_rows`: ``hist_target``'s ``integral``
+    at ``t = j / n`` and its differences, scaled by ``n``, in the same floating-point order."""
+    ny = ys.shape[1]
+    for i in range(start, stop):
+        previous = 0.0
+        for j in range(n + 1):
+            t = j / n
+            k = min(np.int64(math.floor(t * ny)), ny - 1)
+            edge = cums[i, k] + (t - k / ny) * ys[i, k]
+            if j > 0:
+                out[i, j - 1] = n * (edge - previous)
+            previous = edge
 
 
 def match_sorted(
@@ -130,7 +180,12 @@ def _sort_ties(values: np.ndarray, keys: np.ndarray, order: np.ndarray) -> None:
 
 
 def match_sorted_rows(
-    values: np.ndarray, targets_sorted: np.ndarray, *, rows: np.ndarray | None = None
+    values: np.ndarray,
+    targets_sorted: np.ndarray,
+    *,
+    rows: np.ndarray | None = None,
+    out: np.ndarray | None = None,
+    keys: np.ndarray | None = None,
 ) -> np.ndarray:
     """:func:`match_sorted` for many rows at once: row ``i`` of ``values`` gets the values of
     row ``i`` of ``targets_sorted`` in the order of its ranks (ties broken by position).
@@ -147,6 +202,12 @@ def match_sorted_rows(
     rows : ndarray of int, shape (B,), optional
         Row ``i`` of ``values`` takes the targets of row ``rows[i]`` (no reordered copy of
         the targets is made).
+    out : ndarray of float64, shape (B, N), C-contiguous, optional
+        Where to write the result; it may be ``values`` itself (matched in place).
+    keys : ndarray of uint64, shape (B, N), C-contiguous, optional
+        Scratch space for the sort keys. An iterative method passes the same ``out`` and
+        ``keys`` at every step: reused pages, instead of fresh ones the kernel has to fault
+        in (``docs/performance.md``, "Memory reuse"); the result is the same.
     """
     x = np.ascontiguousarray(values, dtype=np.float64)
     t = np.ascontiguousarray(targets_sorted, dtype=np.float64)
@@ -159,11 +220,13 @@ def match_sorted_rows(
         raise ValueError(f"values {x.shape} and targets {t.shape} must be equal (B, N) arrays")
     if index.size and (index.min() < 0 or index.max() >= t.shape[0]):
         raise ValueError(f"rows must index the {t.shape[0]} target rows")
+    if out is not None and (out.shape != x.shape or out.dtype != np.float64 or not out.flags.c_contiguous):
+        raise ValueError(f"out must be a C-contiguous float64 array of shape {x.shape}")
     if compiled_ranks(x.size):
-        keys, shift = sorted_keys(x)
-        return scatter_by_key(x, keys, shift, t, index)
+        sorted_rows, shift = sorted_keys(x, keys)
+        return scatter_by_key(x, sorted_rows, shift, t, index, out)
     order = _argsort_rows(x)
-    return _scatter_by_rank_numpy(x, order, t, index)
+    return _scatter_by_rank_numpy(x, order, t, index, out)
 
 
 def _argsort_rows(x: np.ndarray) -> np.ndarray:
@@ -177,7 +240,7 @@ def _argsort_rows(x: np.ndarray) -> np.ndarray:
 
 
 def _scatter_by_rank_numpy(
-    x: np.ndarray, order: np.ndarray, targets: np.ndarray, rows: np.ndarray
+    x: np.ndarray, order: np.ndarray, targets: np.ndarray, rows: np.ndarray, out: np.ndarray | None = None
 ) -> np.ndarray:
     """``out[i, order[i, k]] = targets[rows[i], k]`` after the runs of equal values (rare in
     continuous data) are put in position order by one ``lexsort`` over their elements only:
@@ -194,7 +257,7 @@ def _scatter_by_rank_numpy(
         positions = order[r, k]
         order = order.copy()
         order[r, k] = positions[np.lexsort((positions, np.cumsum(starts)))]
-    out = np.empty_like(x)
+    out = np.empty_like(x) if out is None else out
     np.put_along_axis(out, order, targets[rows], axis=1)
     return out
 

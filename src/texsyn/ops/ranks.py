@@ -43,16 +43,18 @@ def compiled_ranks(size: int) -> bool:
     return "numba" in sys.modules or size >= COMPILED_SCATTER_VALUES
 
 
-def sorted_keys(x: np.ndarray) -> tuple[np.ndarray, int]:
+def sorted_keys(x: np.ndarray, out: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """Every row's packed sort keys (:func:`_packed_keys_rows`), sorted, and the position bits.
 
-    ``x`` is a C-contiguous ``(B, N)`` float64 array.
+    ``x`` is a C-contiguous ``(B, N)`` float64 array; ``out``, a C-contiguous ``(B, N)``
+    uint64 array the keys are written to (an iterative method reuses it from one call to the
+    next instead of faulting in fresh pages, ``docs/performance.md``).
 
     One ``uint64`` sort replaces an ``argsort``: about 2.5 times faster (NumPy's vectorised
     integer sort), rows split over texsyn's worker threads.
     """
     shift = max(1, int(x.shape[1] - 1).bit_length())
-    keys = _packed_keys(x, x.view(np.uint64), shift)
+    keys = _packed_keys(x, x.view(np.uint64), shift, out)
     workers = min(worker_count(), keys.shape[0])
     if workers <= 1 or keys.size < 1 << 15:
         keys.sort(axis=-1)
@@ -137,29 +139,59 @@ def _canonical_row(x, bits, keys, shift, order):
 
 
 @jit()
-def _scatter_rows(x, bits, keys, shift, targets, rows, out, start, stop):
-    """``out[i, order[k]] = targets[rows[i], k]`` for rows ``[start, stop)``, with each row's
-    canonical order (:func:`_canonical_row`): the values in rank order, equal values by position."""
-    n = x.shape[1]
+def _canonical_keys(x, bits, keys, shift):
+    """Put a row's sorted keys in the canonical order of :func:`_canonical_row`, in place.
+
+    The keys of each run with equal high bits are in position order; a run whose values are
+    not all equal is reordered, stably, by full value. Afterwards the keys' positions (low
+    bits) are the row's positions by value, then by position, with no separate order array
+    (which, for a large row, would be fresh pages at every call).
+    """
+    n = keys.size
     s = np.uint64(shift)
     mask = (np.uint64(1) << s) - np.uint64(1)
-    order = np.empty(n, dtype=np.int64)
+    k = 0
+    while k < n - 1:
+        high = keys[k] >> s
+        if (keys[k + 1] >> s) != high:
+            k += 1
+            continue
+        end = k + 2  # a run of equal high bits
+        while end < n and (keys[end] >> s) == high:
+            end += 1
+        first = x[np.int64(keys[k] & mask)]
+        mixed = False
+        for j in range(k + 1, end):
+            value = x[np.int64(keys[j] & mask)]
+            if value != first and not (first != first and value != value):
+                mixed = True
+        if mixed:  # a stable sort of the run (in position order) by full value
+            full = np.empty(end - k, dtype=np.uint64)
+            for j in range(k, end):
+                position = np.int64(keys[j] & mask)
+                full[j - k] = _ordered_bits(x[position], bits[position])
+            by_value = np.argsort(full, kind="mergesort")
+            run = keys[k:end].copy()
+            for j in range(end - k):
+                keys[k + j] = run[by_value[j]]
+        k = end
+
+
+@jit()
+def _scatter_rows(x, bits, keys, shift, targets, rows, out, start, stop):
+    """``out[i, order[k]] = targets[rows[i], k]`` for rows ``[start, stop)``, with each row's
+    canonical order (:func:`_canonical_keys`, which rewrites the keys): the values in rank
+    order, equal values by position. Each row of ``x`` is read before ``out``'s row is
+    written, so ``out`` may be ``x``."""
+    n = x.shape[1]
+    mask = (np.uint64(1) << np.uint64(shift)) - np.uint64(1)
     for i in range(start, stop):
         key = keys[i]
+        _canonical_keys(x[i], bits[i], key, shift)
         target = targets[rows[i]]
         row = out[i]
-        clean = True  # no two keys share their high bits: the keys' positions are the order
-        for k in range(n - 1):
-            if (key[k + 1] >> s) == (key[k] >> s):
-                clean = False
-                break
-        if clean:
-            for k in range(n):
-                row[np.int64(key[k] & mask)] = target[k]
-        else:
-            _canonical_row(x[i], bits[i], key, shift, order)
-            for k in range(n):
-                row[order[k]] = target[k]
+        for k in range(n):
+            row[np.int64(key[k] & mask)] = target[k]
 
 
 @jit(parallel=True)
@@ -186,9 +218,11 @@ def _on_threads(x: np.ndarray) -> bool:
     return x.shape[0] > 1 and x.size >= PARALLEL_RANK_VALUES and worker_count() > 1
 
 
-def _packed_keys(x: np.ndarray, bits: np.ndarray, shift: int) -> np.ndarray:
-    """The packed sort keys of every row (:func:`_packed_keys_rows`)."""
-    keys = np.empty(x.shape, dtype=np.uint64)
+def _packed_keys(x: np.ndarray, bits: np.ndarray, shift: int, out: np.ndarray | None = None) -> np.ndarray:
+    """The packed sort keys of every row (:func:`_packed_keys_rows`), in ``out`` when given."""
+    keys = np.empty(x.shape, dtype=np.uint64) if out is None else out
+    if keys.shape != x.shape or keys.dtype != np.uint64 or not keys.flags.c_contiguous:
+        raise ValueError(f"keys must be a C-contiguous uint64 array of shape {x.shape}")
     if _on_threads(x):
         _packed_keys_parallel(x, bits, shift, keys)
     else:
@@ -196,8 +230,13 @@ def _packed_keys(x: np.ndarray, bits: np.ndarray, shift: int) -> np.ndarray:
     return keys
 
 
-def scatter_by_key(x, keys, shift: int, targets, rows) -> np.ndarray:
+def scatter_by_key(x, keys, shift: int, targets, rows, out: np.ndarray | None = None) -> np.ndarray:
     """``out[i, order[k]] = targets[rows[i], k]`` with every row's canonical order (:func:`_scatter_rows`).
+
+    The keys are scratch: the positions of runs of equal high bits are reordered in place.
+
+    ``out`` may be ``x`` itself: each row is read (only where its keys tie) before it is
+    written, and rows are independent.
 
     Parameters
     ----------
@@ -208,9 +247,11 @@ def scatter_by_key(x, keys, shift: int, targets, rows) -> np.ndarray:
     targets : ndarray, shape (T, N)
         Ascending values; row ``i`` of the result takes those of row ``rows[i]``.
     rows : ndarray of int64, shape (B,)
+    out : ndarray of float64, shape (B, N), C-contiguous, optional
+        Where to write the result (a new array by default).
     """
     bits = x.view(np.uint64)
-    out = np.empty_like(x)
+    out = np.empty_like(x) if out is None else out
     if _on_threads(x):
         _scatter_parallel(x, bits, keys, shift, targets, rows, out)
     else:

@@ -161,7 +161,7 @@ def _schedule(targets, orders, masses):
 
 
 @jit()
-def _forward_block(images, src, dst, detail, share, low, scales, normalized, out, b0, b1):
+def _forward_block(images, src, dst, detail, share, low, scales, normalized, out, work, b0, b1):
     """The sequential in-place scan of images ``b0 .. b1 - 1`` of ``(B, N)`` together, into ``out`` ``(L+1, B, N)``.
 
     Merge ``k`` of level ``l``: ``d_l(m) = detail (a(m) - r(p))``, ``r(p) += share (a(m) - r(p))``
@@ -169,15 +169,16 @@ def _forward_block(images, src, dst, detail, share, low, scales, normalized, out
     ``b1 - b0`` values per pixel), so each merge loads its pixels, target and factors once for
     all of them; every value gets the arithmetic of the one-image scan in the same order, so
     the same bytes (``tests/test_grouplet_frame.py``). With ``normalized`` each coefficient is
-    then divided by ``scales[l, m]``. Returns the updates per image.
+    then divided by ``scales[l, m]``. ``work`` ``(2, B * N)`` holds the two interleaved
+    residuals (columns ``b0 N .. b1 N``). Returns the updates per image.
     """
     levels, n = src.shape
     nb = b1 - b0
-    a = np.empty((n, nb))
+    a = work[0, n * b0 : n * b1].reshape(n, nb)
     for m in range(n):
         for b in range(nb):
             a[m, b] = images[b0 + b, m]
-    r = np.empty((n, nb))
+    r = work[1, n * b0 : n * b1].reshape(n, nb)
     count = 0
     for lv in range(levels):
         r[:] = a  # the residual, updated in place
@@ -202,31 +203,32 @@ def _forward_block(images, src, dst, detail, share, low, scales, normalized, out
 
 
 @jit(parallel=True)
-def _forward_rows(images, src, dst, detail, share, low, scales, normalized, n_blocks):
-    """The scan of every row of ``images`` ``(B, N)``: ``(L+1, B, N)``, in ``n_blocks``
-    blocks of interleaved images on numba's threads (:func:`_forward_block`)."""
-    levels = src.shape[0]
+def _forward_rows(images, src, dst, detail, share, low, scales, normalized, out, work, n_blocks):
+    """The scan of every row of ``images`` ``(B, N)`` into ``out`` ``(L+1, B, N)``, in
+    ``n_blocks`` blocks of interleaved images on numba's threads (:func:`_forward_block`)."""
     rows = images.shape[0]
-    out = np.empty((levels + 1, rows, images.shape[1]))
     counts = np.zeros(n_blocks, dtype=np.int64)
     size = (rows + n_blocks - 1) // n_blocks
     for c in prange(n_blocks):
         b0 = min(rows, c * size)
         b1 = min(rows, b0 + size)
         if b1 > b0:
-            counts[c] = _forward_block(images, src, dst, detail, share, low, scales, normalized, out, b0, b1)
-    return out, counts
+            counts[c] = _forward_block(
+                images, src, dst, detail, share, low, scales, normalized, out, work, b0, b1
+            )
+    return counts
 
 
 @jit()
-def _inverse_block(coefficients, src, dst, detail, share, low, scales, normalized, out, b0, b1):
+def _inverse_block(coefficients, src, dst, detail, share, low, scales, normalized, out, work, b0, b1):
     """Undo the merges of images ``b0 .. b1 - 1`` of ``(L+1, B, N)`` coefficients in reverse
     order, interleaved as in :func:`_forward_block`, into ``out`` ``(B, N)``; the mean of each
     pixel's two estimates is the adjoint. With ``normalized`` each coefficient is first
-    multiplied by ``scales[l, m]``. Returns the updates per image."""
+    multiplied by ``scales[l, m]``. ``work`` as in :func:`_forward_block`. Returns the
+    updates per image."""
     levels, n = src.shape
     nb = b1 - b0
-    r = np.empty((n, nb))
+    r = work[0, n * b0 : n * b1].reshape(n, nb)
     count = 0
     for m in range(n):
         for b in range(nb):
@@ -235,7 +237,7 @@ def _inverse_block(coefficients, src, dst, detail, share, low, scales, normalize
                 c = c * scales[levels, m]
             r[m, b] = c / low[m]
         count += 1
-    source = np.empty((n, nb))
+    source = work[1, n * b0 : n * b1].reshape(n, nb)
     for lv in range(levels - 1, -1, -1):
         for k in range(n - 1, -1, -1):
             m = src[lv, k]
@@ -262,11 +264,10 @@ def _inverse_block(coefficients, src, dst, detail, share, low, scales, normalize
 
 
 @jit(parallel=True)
-def _inverse_rows(coefficients, src, dst, detail, share, low, scales, normalized, n_blocks):
-    """The inverse of every image of ``(L+1, B, N)`` coefficients: ``(B, N)``, in blocks
-    of interleaved images on numba's threads (:func:`_inverse_block`)."""
+def _inverse_rows(coefficients, src, dst, detail, share, low, scales, normalized, out, work, n_blocks):
+    """The inverse of every image of ``(L+1, B, N)`` coefficients into ``out`` ``(B, N)``,
+    in blocks of interleaved images on numba's threads (:func:`_inverse_block`)."""
     rows = coefficients.shape[1]
-    out = np.empty((rows, coefficients.shape[2]))
     counts = np.zeros(n_blocks, dtype=np.int64)
     size = (rows + n_blocks - 1) // n_blocks
     for c in prange(n_blocks):
@@ -274,9 +275,18 @@ def _inverse_rows(coefficients, src, dst, detail, share, low, scales, normalized
         b1 = min(rows, b0 + size)
         if b1 > b0:
             counts[c] = _inverse_block(
-                coefficients, src, dst, detail, share, low, scales, normalized, out, b0, b1
+                coefficients, src, dst, detail, share, low, scales, normalized, out, work, b0, b1
             )
-    return out, counts
+    return counts
+
+
+def _buffer(given: np.ndarray | None, shape: tuple[int, ...], name: str) -> np.ndarray:
+    """``given`` checked as a C-contiguous float64 array of ``shape`` (reshaped), or a new one."""
+    if given is None:
+        return np.empty(shape)
+    if given.dtype != np.float64 or not given.flags.c_contiguous or given.size != math.prod(shape):
+        raise ValueError(f"{name} must be a C-contiguous float64 array of {math.prod(shape)} values")
+    return given.reshape(shape)
 
 
 class GroupletTightFrame:
@@ -349,11 +359,21 @@ class GroupletTightFrame:
         self.scales = factors / line[:, None]
         self.last_count = 0
 
-    def forward(self, image: np.ndarray, *, scales: np.ndarray | None = None) -> np.ndarray:
+    def forward(
+        self,
+        image: np.ndarray,
+        *,
+        scales: np.ndarray | None = None,
+        out: np.ndarray | None = None,
+        work: np.ndarray | None = None,
+    ) -> np.ndarray:
         """Coefficients ``d_l(m)``, shape ``(L+1, *batch, H, W)``, of images ``(*batch, H, W)``; layer ``L`` is ``d_L``.
 
         ``scales`` ``(L+1, H, W)``: return ``d_l(m) / scales[l, m]`` instead (the same bytes
-        as dividing afterwards, without another pass over the coefficients).
+        as dividing afterwards, without another pass over the coefficients). ``out``, a
+        C-contiguous float64 array of the result's shape, receives the coefficients, and
+        ``work`` (:meth:`work_buffer`) holds the scan's residuals: an iterative method passes
+        the same ones at every step instead of faulting in fresh pages (the same bytes).
         """
         x = np.asarray(image, dtype=np.float64)
         if x.shape[-2:] != self.shape:
@@ -361,23 +381,35 @@ class GroupletTightFrame:
         batch = x.shape[:-2]
         flat = np.ascontiguousarray(x.reshape((-1, self.shape[0] * self.shape[1])))
         factors, normalized = self._scales_of(scales)
+        shape = (self.levels + 1,) + flat.shape
+        result = _buffer(out, shape, "out")
+        scratch = self.work_buffer(flat.shape[0]) if work is None else _buffer(work, (2, flat.size), "work")
         blocks = self._blocks(flat.shape[0])
         if blocks > 1:
-            out, counts = _forward_rows(flat, self.orders, *self._merges, factors, normalized, blocks)
+            counts = _forward_rows(
+                flat, self.orders, *self._merges, factors, normalized, result, scratch, blocks
+            )
             self.last_count = int(counts[0])
         else:
-            out = np.empty((self.levels + 1,) + flat.shape)
             count = _forward_block(
-                flat, self.orders, *self._merges, factors, normalized, out, 0, flat.shape[0]
+                flat, self.orders, *self._merges, factors, normalized, result, scratch, 0, flat.shape[0]
             )
             self.last_count = int(count) if flat.shape[0] else 0
-        return out.reshape((self.levels + 1,) + batch + self.shape)
+        return result.reshape((self.levels + 1,) + batch + self.shape)
 
-    def inverse(self, coefficients: np.ndarray, *, scales: np.ndarray | None = None) -> np.ndarray:
+    def inverse(
+        self,
+        coefficients: np.ndarray,
+        *,
+        scales: np.ndarray | None = None,
+        out: np.ndarray | None = None,
+        work: np.ndarray | None = None,
+    ) -> np.ndarray:
         """Images ``(*batch, H, W)`` from ``(L+1, *batch, H, W)``: ``f = sum_l tau_l sum_m d_l(m) b_{l,m}``.
 
         ``scales`` ``(L+1, H, W)``: the coefficients are ``d_l(m) / scales[l, m]`` (the
         inverse of :meth:`forward` with the same ``scales``); each is multiplied back first.
+        ``out`` and ``work``: reused buffers, as in :meth:`forward`.
         """
         c = np.asarray(coefficients, dtype=np.float64)
         if c.shape[0] != self.levels + 1 or c.shape[-2:] != self.shape:
@@ -387,17 +419,25 @@ class GroupletTightFrame:
         batch = c.shape[1:-2]
         flat = np.ascontiguousarray(c.reshape((self.levels + 1, -1, self.shape[0] * self.shape[1])))
         factors, normalized = self._scales_of(scales)
-        blocks = self._blocks(flat.shape[1])
+        result = _buffer(out, flat.shape[1:], "out")
+        images = flat.shape[1]
+        scratch = self.work_buffer(images) if work is None else _buffer(work, (2, result.size), "work")
+        blocks = self._blocks(images)
         if blocks > 1:
-            out, counts = _inverse_rows(flat, self.orders, *self._merges, factors, normalized, blocks)
+            counts = _inverse_rows(
+                flat, self.orders, *self._merges, factors, normalized, result, scratch, blocks
+            )
             self.last_count = int(counts[0])
         else:
-            out = np.empty(flat.shape[1:])
             count = _inverse_block(
-                flat, self.orders, *self._merges, factors, normalized, out, 0, flat.shape[1]
+                flat, self.orders, *self._merges, factors, normalized, result, scratch, 0, images
             )
-            self.last_count = int(count) if flat.shape[1] else 0
-        return out.reshape(batch + self.shape)
+            self.last_count = int(count) if images else 0
+        return result.reshape(batch + self.shape)
+
+    def work_buffer(self, images: int) -> np.ndarray:
+        """Scratch space of :meth:`forward` and :meth:`inverse` for ``images`` images: ``(2, images * N)``."""
+        return np.empty((2, int(images) * self.shape[0] * self.shape[1]))
 
     def _scales_of(self, scales: np.ndarray | None) -> tuple[np.ndarray, bool]:
         """``scales`` as contiguous ``(L+1, N)`` factors, and whether there are any."""

@@ -17,6 +17,7 @@ in speed (``docs/methods/grouplets.md``).
 
 from __future__ import annotations
 
+import math
 import warnings
 
 import numpy as np
@@ -158,30 +159,59 @@ class WaveletGroupletTransform:
         self.normalized = bool(normalized)
         self._scales = self.grouplets.scales.reshape((-1,) + self.shape)
 
-    def analyse(self, image: np.ndarray) -> np.ndarray:
+    def analyse(
+        self, image: np.ndarray, *, out: np.ndarray | None = None, work: np.ndarray | None = None
+    ) -> np.ndarray:
         """Contiguous coefficients ``(L+1, J+1, C, H, W)`` of an image ``(H, W, C)`` (or ``(H, W)``, ``C = 1``).
 
         The layout the grouplet frame computes in (grouplet scale first), with no copy; rows
         of ``reshape(-1, H*W)`` are the bands ``(l, j, c)``. :meth:`forward` is the same
-        numbers in the order ``(J+1, L+1[, C], H, W)``.
+        numbers in the order ``(J+1, L+1[, C], H, W)``. ``out`` (the result's size) and
+        ``work`` (:meth:`work_buffer`): buffers reused from one call to the next
+        (:meth:`GroupletTightFrame.forward`); the same bytes.
         """
         x = np.asarray(image, dtype=np.float64)
         planes = x[None] if x.ndim == 2 else np.moveaxis(x, -1, 0)  # (C, H, W)
-        bands = self.pyramid.forward_planes(planes)  # (J+1, C, H, W)
+        shape = (self.pyramid.levels + 1, planes.shape[0]) + self.shape
+        bands = self.pyramid.forward_planes(
+            planes, out=None if work is None else work[0, : math.prod(shape)].reshape(shape)
+        )  # (J+1, C, H, W)
         flat = bands.reshape((bands.shape[0] * bands.shape[1],) + self.shape)
-        coefficients = self.grouplets.forward(flat, scales=self._scales if self.normalized else None)
+        coefficients = self.grouplets.forward(
+            flat,
+            scales=self._scales if self.normalized else None,
+            out=out,
+            work=None if work is None else work[1:],
+        )
         return coefficients.reshape((-1,) + bands.shape)
 
-    def synthesise(self, coefficients: np.ndarray) -> np.ndarray:
-        """Image ``(H, W, C)`` from coefficients in :meth:`analyse`'s layout (the pseudo-inverse)."""
+    def synthesise(self, coefficients: np.ndarray, *, work: np.ndarray | None = None) -> np.ndarray:
+        """Image ``(H, W, C)`` from coefficients in :meth:`analyse`'s layout (the pseudo-inverse).
+
+        ``work`` (:meth:`work_buffer`): a buffer reused from one call to the next.
+        """
         c = np.asarray(coefficients, dtype=np.float64)
         levels, bands, channels = c.shape[:3]
+        images = bands * channels
         planes = self.grouplets.inverse(
-            c.reshape((levels, bands * channels) + self.shape),
+            c.reshape((levels, images) + self.shape),
             scales=self._scales if self.normalized else None,
+            out=None if work is None else work[0, : images * self.size],
+            work=None if work is None else work[1:],
         )
         image = self.pyramid.inverse_planes(planes.reshape((bands, channels) + self.shape))
         return np.moveaxis(image, 0, -1)
+
+    @property
+    def size(self) -> int:
+        """Pixels ``H * W``."""
+        return self.shape[0] * self.shape[1]
+
+    def work_buffer(self, channels: int) -> np.ndarray:
+        """Scratch space of :meth:`analyse` and :meth:`synthesise` for ``channels`` channels:
+        ``(3, (J+1) C H W)``: the pyramid's bands (analysis) or the grouplet frame's
+        synthesis, and the grouplet scan's two residuals."""
+        return np.empty((3, (self.pyramid.levels + 1) * int(channels) * self.size))
 
     def forward(self, image: np.ndarray) -> np.ndarray:
         """``(J+1, L+1, H, W)`` coefficients of a grey image, ``(J+1, L+1, C, H, W)`` of a colour one."""

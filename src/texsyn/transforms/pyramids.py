@@ -15,6 +15,7 @@ from ..ops.linalg import worker_count
 from .steerable import radial_lowpass
 
 __all__ = [
+    "SPECTRUM_VALUES",
     "LaplacianTightFrame",
     "crop_to_multiple",
     "gaussian_blur",
@@ -22,6 +23,13 @@ __all__ = [
     "zoom_in",
     "zoom_out",
 ]
+
+
+#: complex values of the filtered spectra one FFT call of :class:`LaplacianTightFrame` holds:
+#: 16 MB, so that a large stack's temporaries are reused by the allocator instead of being
+#: new pages faulted in at every call (glibc maps blocks above 32 MB afresh each time;
+#: ``docs/methods/grouplets.md``, "Performance")
+SPECTRUM_VALUES = 1 << 20
 
 
 def gaussian_blur(image: np.ndarray, sigma: float, *, mode: str = "symmetric") -> np.ndarray:
@@ -159,24 +167,57 @@ class LaplacianTightFrame:
         filt = self.filters if b.ndim == 3 else self.filters[..., None]
         return np.fft.irfft2(np.sum(filt * spectra, axis=0), s=self.shape, axes=(0, 1))
 
-    def forward_planes(self, planes: np.ndarray) -> np.ndarray:
+    def forward_planes(self, planes: np.ndarray, *, out: np.ndarray | None = None) -> np.ndarray:
         """Bands ``(J+1, B, H, W)`` of a stack of images ``(B, H, W)``, contiguous.
 
         The same transform as :meth:`forward` with the images first, as the grouplet frame
         reads them; the 2-D FFTs of the stack run on texsyn's worker threads (each one is
         computed the same way on any thread, so the result does not depend on their number).
+        The images are transformed a few at a time (:data:`SPECTRUM_VALUES`), so the
+        temporaries of a large stack stay small; ``out`` (C-contiguous, ``(J+1, B, H, W)``)
+        receives the bands, a buffer an iterative method reuses.
         """
         x = np.asarray(planes, dtype=np.float64)
         if x.ndim != 3 or x.shape[1:] != self.shape:
             raise ValueError(f"planes must have shape (B, {self.shape[0]}, {self.shape[1]}), got {x.shape}")
+        shape = (self.filters.shape[0],) + x.shape
+        if out is not None and (out.shape != shape or out.dtype != np.float64 or not out.flags.c_contiguous):
+            raise ValueError(f"out must be a C-contiguous float64 array of shape {shape}")
+        step = self._chunk(x.shape[0])
+        if out is None and step >= x.shape[0]:
+            return self._forward_chunk(x, None)
+        result = np.empty(shape) if out is None else out
+        product: np.ndarray | None = None
+        for b0 in range(0, x.shape[0], step):
+            chunk = x[b0 : b0 + step]
+            if product is None or len(product[0]) != len(chunk):
+                product = np.empty(
+                    (len(self.filters), len(chunk)) + self.filters[0].shape, dtype=np.complex128
+                )
+            result[:, b0 : b0 + step] = self._forward_chunk(chunk, product)
+        return result
+
+    def _forward_chunk(self, x: np.ndarray, product: np.ndarray | None) -> np.ndarray:
+        """Bands ``(J+1, b, H, W)`` of ``b`` images; ``product``: where to filter their spectra."""
         spectrum = sfft.rfft2(x, axes=(1, 2), workers=worker_count())
-        return sfft.irfft2(
-            self.filters[:, None] * spectrum[None], s=self.shape, axes=(2, 3), workers=worker_count()
-        )
+        filtered = np.multiply(self.filters[:, None], spectrum[None], out=product)
+        return sfft.irfft2(filtered, s=self.shape, axes=(2, 3), workers=worker_count())
 
     def inverse_planes(self, bands: np.ndarray) -> np.ndarray:
-        """Images ``(B, H, W)`` from bands ``(J+1, B, H, W)`` (the adjoint of :meth:`forward_planes`)."""
+        """Images ``(B, H, W)`` from bands ``(J+1, B, H, W)`` (the adjoint of :meth:`forward_planes`).
+
+        The images are computed a few at a time, as in :meth:`forward_planes`.
+        """
         b = np.asarray(bands, dtype=np.float64)
-        spectra = sfft.rfft2(b, axes=(2, 3), workers=worker_count())
-        total = np.sum(self.filters[:, None] * spectra, axis=0)
-        return sfft.irfft2(total, s=self.shape, axes=(1, 2), workers=worker_count())
+        step = self._chunk(b.shape[1])
+        images = []
+        for b0 in range(0, b.shape[1], step):
+            spectra = sfft.rfft2(b[:, b0 : b0 + step], axes=(2, 3), workers=worker_count())
+            total = np.sum(np.multiply(self.filters[:, None], spectra, out=spectra), axis=0)
+            images.append(sfft.irfft2(total, s=self.shape, axes=(1, 2), workers=worker_count()))
+        return images[0] if len(images) == 1 else np.concatenate(images)
+
+    def _chunk(self, planes: int) -> int:
+        """Images per FFT call: the filtered spectra of all ``J+1`` bands within :data:`SPECTRUM_VALUES`."""
+        per_image = self.filters.shape[0] * self.filters.shape[1] * self.filters.shape[2]
+        return max(1, min(planes, SPECTRUM_VALUES // per_image))
