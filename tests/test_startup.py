@@ -21,7 +21,16 @@ from texsyn.methods import METHODS, MethodRegistry
 from texsyn.ops.jit import LazyKernel, jit, prange
 
 #: what no command should load unless its method needs it
-HEAVY = ("numba", "sklearn", "scipy.ndimage", "scipy.sparse", "skimage", "texsyn.report", "texsyn.metrics")
+HEAVY = (
+    "numba",
+    "sklearn",
+    "scipy.ndimage",
+    "scipy.sparse",
+    "skimage",
+    "texsyn.report",
+    "texsyn.metrics",
+    "importlib.metadata",
+)
 
 
 def loaded_after(code: str) -> set[str]:
@@ -40,6 +49,13 @@ def test_import_texsyn_loads_no_method_numba_scikit_learn_or_report():
         "texsyn.methods._memory",
         "texsyn.methods._deprecation",
     }
+
+
+def test_the_version_literal_is_the_installed_version():
+    """``texsyn._version`` is a literal (no ``importlib.metadata`` at start-up) that the build reads."""
+    from importlib.metadata import version
+
+    assert texsyn.__version__ == version("texsyn")
 
 
 def test_synth_with_quilting_loads_quilting_only(tmp_path):

@@ -1,8 +1,8 @@
-"""The installed version of texsyn (layer 0: imported by the report and the front doors)."""
+"""The version of texsyn (layer 0: imported by the report and the front doors).
 
-from importlib.metadata import PackageNotFoundError, version
+A literal, read by the build (``pyproject.toml``, ``[tool.setuptools.dynamic]``) and at run
+time without ``importlib.metadata``, whose search of the installed distributions costs
+about 15 ms of every command's start-up (``docs/performance.md``, "Start-up").
+"""
 
-try:
-    __version__ = version("texsyn")
-except PackageNotFoundError:  # pragma: no cover - running from a source tree
-    __version__ = "0.0.0+unknown"
+__version__ = "0.2.0"
