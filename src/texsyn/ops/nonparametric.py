@@ -227,6 +227,37 @@ class NonParametricSampler:
             return source, error, error <= accept
         return self.centres[choice], error, error <= accept
 
+    def fill_screened(
+        self,
+        canvas: np.ndarray,
+        filled: np.ndarray,
+        source: np.ndarray,
+        pixels: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+        batches: tuple[int, int],
+        screen: WindowScreen,
+        chunk_start: int,
+        tolerance: float,
+        accept: float,
+    ) -> tuple[int, int]:
+        """:meth:`match_screened` for consecutive batches of a pass, writing the output.
+
+        Each batch is chosen as :meth:`match_screened` chooses it and its accepted pixels
+        written (values, mask, source map), in one compiled loop
+        (:meth:`texsyn.ops.window_screen.ScreenBank.fill`, which gives the arguments);
+        it stops before a batch whose choice the rounding of :meth:`match` could change,
+        which the caller then searches with :meth:`match`.
+
+        Returns
+        -------
+        next : int
+            The batch to search with :meth:`match` (``batches[1]`` when none).
+        written : int
+            Pixels filled.
+        """
+        return self._screen.fill(
+            canvas, filled, source, pixels, batches, screen, chunk_start, self.centres, tolerance, accept
+        )
+
     def grow(
         self,
         shape: tuple[int, int],
