@@ -279,10 +279,15 @@ class _Chunks:
         The pass's pixels in batch order.
     size : int
         Pixels per chunk, about.
+    buffers : list
+        Two places for bounds (``sampler.screen_buffers``, or None until needed), used by
+        the even and the odd chunks: a chunk's bounds are computed while the previous
+        chunk's are in use, and the pages are reused from pass to pass.
     """
 
-    def __init__(self, sampler, background, bounds, rows, cols, size):
+    def __init__(self, sampler, background, bounds, rows, cols, size, buffers):
         self.sampler, self.background, self.bounds = sampler, background, bounds
+        self.buffers, self.size = buffers, size
         self.rows, self.cols = rows, cols
         n_batches = bounds.size - 1
         firsts = [0]
@@ -298,7 +303,10 @@ class _Chunks:
         span = slice(self.bounds[self.firsts[chunk]], self.bounds[self.firsts[chunk + 1]])
         rows, cols = self.rows[span], self.cols[span]
         windows = np.moveaxis(value_windows[rows, cols], 1, 3)
-        return self.background.submit(self.sampler.screen, windows, known_windows[rows, cols])
+        room = self.buffers[chunk % 2]
+        if room is None or room[0].shape[0] < rows.size:
+            room = self.buffers[chunk % 2] = self.sampler.screen_buffers(max(rows.size, 2 * self.size))
+        return self.background.submit(self.sampler.screen, windows, known_windows[rows, cols], room)
 
     def screen(self, chunk: int, value_windows: np.ndarray, known_windows: np.ndarray) -> Any:
         """The bounds of chunk ``chunk`` (the chunks are asked for in order); the next
@@ -466,6 +474,7 @@ class _ExactPass:
         # computed from a more recent state (tighter bounds)
         self.screen_rows = max(128, (1 << 21) // max(sampler.n_windows, 1))
         self.screened = sampler.screens
+        self.buffers: list = [None, None]
 
     def __call__(self, rows, cols, uniforms, tolerance: float, threshold: float) -> int:
         sampler, canvas, r = self.sampler, self.canvas, self.canvas.r
@@ -478,7 +487,7 @@ class _ExactPass:
             return sum(
                 self._match(rows, cols, uniforms, bounds, b, tolerance, threshold) for b in range(n_batches)
             )
-        chunks = _Chunks(sampler, self.background, bounds, rows, cols, self.screen_rows)
+        chunks = _Chunks(sampler, self.background, bounds, rows, cols, self.screen_rows, self.buffers)
         pixels = (rows, cols, uniforms, bounds)
         filled_now = 0
         for chunk in range(len(chunks.firsts) - 1):

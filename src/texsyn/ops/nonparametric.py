@@ -175,7 +175,9 @@ class NonParametricSampler:
         """
         return type(self).match is NonParametricSampler.match
 
-    def screen(self, windows: np.ndarray, known: np.ndarray) -> WindowScreen:
+    def screen(
+        self, windows: np.ndarray, known: np.ndarray, out: tuple[np.ndarray, np.ndarray] | None = None
+    ) -> WindowScreen:
         """Float32 lower bounds of the distances of ``k`` windows, for :meth:`match_screened`
         (:meth:`texsyn.ops.window_screen.ScreenBank.screen`).
 
@@ -184,8 +186,14 @@ class NonParametricSampler:
         windows : ndarray, shape (k, w, w, C)
         known : ndarray of bool, shape (k, w, w)
             What is known of them now; it must stay known until they are matched.
+        out : (ndarray, ndarray), optional
+            :meth:`screen_buffers` of at least ``k`` rows, used by the result.
         """
-        return self._screen.screen(windows, known)
+        return self._screen.screen(windows, known, out)
+
+    def screen_buffers(self, rows: int) -> tuple[np.ndarray, np.ndarray]:
+        """Room for the bounds of up to ``rows`` windows (:meth:`screen`'s ``out``)."""
+        return self._screen.buffers(rows)
 
     def match_screened(
         self,

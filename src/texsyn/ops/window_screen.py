@@ -536,7 +536,17 @@ class ScreenBank:
         self.grid_cols = exemplar.shape[1] - window + 1
         self.planes = np.ascontiguousarray(np.moveaxis(exemplar, 2, 0))
 
-    def screen(self, windows: np.ndarray, known: np.ndarray) -> WindowScreen:
+    def buffers(self, rows: int) -> tuple[np.ndarray, np.ndarray]:
+        """Room for the bounds of up to ``rows`` windows, for :meth:`screen`'s ``out``."""
+        n_windows = self.bank.shape[1]
+        padded = -(-n_windows // BLOCK_COLUMNS) * BLOCK_COLUMNS
+        grouped = np.empty((rows, padded), np.float32)
+        grouped[:, n_windows:] = np.inf
+        return grouped, np.empty((rows, padded // _BLOCK), np.float32)
+
+    def screen(
+        self, windows: np.ndarray, known: np.ndarray, out: tuple[np.ndarray, np.ndarray] | None = None
+    ) -> WindowScreen:
         """Float32 lower bounds of the distances of ``k`` windows to every exemplar window.
 
         The windows are put in four groups by the side of the disc that is known (the
@@ -555,6 +565,9 @@ class ScreenBank:
         windows : ndarray, shape (k, w, w, C)
         known : ndarray of bool, shape (k, w, w)
             What is known of them now; it must stay known until they are matched.
+        out : (ndarray, ndarray), optional
+            :meth:`buffers` of at least ``k`` rows, which the result then uses (a caller
+            that screens many times reuses them, rather than new pages each time).
         """
         k, channels = windows.shape[0], windows.shape[3]
         a = (known * self.gauss).reshape(k, -1)[:, self.ring]
@@ -572,10 +585,10 @@ class ScreenBank:
         starts = np.searchsorted(group[order], np.arange(5))
         pixels = self.ring.size
         n_windows = self.bank.shape[1]
-        padded = -(-n_windows // BLOCK_COLUMNS) * BLOCK_COLUMNS
-        grouped = np.empty((k, padded), np.float32)
-        grouped[:, n_windows:] = np.inf
-        minima = np.empty((k, padded // _BLOCK), np.float32)
+        if out is None or out[0].shape[0] < k:
+            out = self.buffers(k)
+        grouped, minima = out[0][:k], out[1][:k]
+        padded = grouped.shape[1]
         columns = np.zeros(k)
         tiles = []
         for g in range(4):
