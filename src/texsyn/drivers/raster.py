@@ -43,6 +43,7 @@ from ..ops.canvas import padded_canvas
 from ..ops.kcoherence import CoherentWindows
 from ..ops.nonparametric import NonParametricSampler, schedule_batches
 from ..ops.progress import Reporter
+from ..ops.window_screen import gather_windows
 
 __all__ = [
     "Block",
@@ -297,24 +298,22 @@ class _Chunks:
         self.firsts = firsts
         self.upcoming: Any = None
 
-    def _submit(self, chunk: int, value_windows: np.ndarray, known_windows: np.ndarray) -> Any:
+    def _submit(self, chunk: int, canvas: _Canvas) -> Any:
         if chunk >= len(self.firsts) - 1:
             return None
         span = slice(self.bounds[self.firsts[chunk]], self.bounds[self.firsts[chunk + 1]])
         rows, cols = self.rows[span], self.cols[span]
-        windows = np.moveaxis(value_windows[rows, cols], 1, 3)
+        windows, known = gather_windows(canvas.values, canvas.filled, rows, cols, 2 * canvas.r + 1)
         room = self.buffers[chunk % 2]
         if room is None or room[0].shape[0] < rows.size:
             room = self.buffers[chunk % 2] = self.sampler.screen_buffers(max(rows.size, 2 * self.size))
-        return self.background.submit(self.sampler.screen, windows, known_windows[rows, cols], room)
+        return self.background.submit(self.sampler.screen, windows, known, room)
 
-    def screen(self, chunk: int, value_windows: np.ndarray, known_windows: np.ndarray) -> Any:
+    def screen(self, chunk: int, canvas: _Canvas) -> Any:
         """The bounds of chunk ``chunk`` (the chunks are asked for in order); the next
         chunk's are started in the background."""
-        current = (
-            self.upcoming if self.upcoming is not None else self._submit(chunk, value_windows, known_windows)
-        )
-        self.upcoming = self._submit(chunk + 1, value_windows, known_windows)
+        current = self.upcoming if self.upcoming is not None else self._submit(chunk, canvas)
+        self.upcoming = self._submit(chunk + 1, canvas)
         return current.result()
 
 
@@ -470,9 +469,12 @@ class _ExactPass:
     def __init__(self, sampler: NonParametricSampler, canvas: _Canvas, background, max_batch: int):
         self.sampler, self.canvas, self.background = sampler, canvas, background
         self.batch_cap = int(max(8, min(max_batch, (1 << 23) // max(sampler.n_windows, 1))))
-        # small chunks: the matching waits only for a pass's first one, and later ones are
-        # computed from a more recent state (tighter bounds)
-        self.screen_rows = max(128, (1 << 21) // max(sampler.n_windows, 1))
+        # chunks of about 300 rows (colour 128 x 128 exemplar): the matching waits only for
+        # a pass's first one, later ones are computed from a recent state (tight bounds),
+        # and each group of a chunk's product has rows enough to amortise the packing of
+        # the bank (measured: 150 rows 4.1 s of CPU, 300 rows 3.6 s, the main thread 1.0
+        # and 1.3 s; docs/methods/efros_leung.md, "Performance")
+        self.screen_rows = max(128, (1 << 22) // max(sampler.n_windows, 1))
         self.screened = sampler.screens
         self.buffers: list = [None, None]
 
@@ -491,7 +493,7 @@ class _ExactPass:
         pixels = (rows, cols, uniforms, bounds)
         filled_now = 0
         for chunk in range(len(chunks.firsts) - 1):
-            screen = chunks.screen(chunk, canvas.value_windows, canvas.known_windows)
+            screen = chunks.screen(chunk, canvas)
             batch, stop = chunks.firsts[chunk], chunks.firsts[chunk + 1]
             while batch < stop:
                 batch, written = sampler.fill_screened(

@@ -23,7 +23,7 @@ import numpy as np
 from .jit import jit
 from .linalg import BLOCK_COLUMNS, fixed_order, parallel_map
 
-__all__ = ["ScreenBank", "WindowScreen", "window_ssd"]
+__all__ = ["ScreenBank", "WindowScreen", "gather_windows", "window_ssd"]
 
 #: float32 and float64 unit roundoff (half an ulp of 1)
 _U32 = 2.0**-24
@@ -230,10 +230,15 @@ def _choose_row(
             first_val[p] = v
             first_idx[p] = passed[k]
     best_raw = upper
-    for t in range(min(n_first, count)):
-        top = first_idx[t] // grid_cols
-        left = first_idx[t] - top * grid_cols
-        best_raw = min(best_raw, window_ssd(planes, top, left, oy, ox, weights, values, known))
+    n_exact = min(n_first, count)
+    for t in range(n_exact):  # their exact distances (kept: they are survivors too, mostly)
+        if first_idx[t] == first:
+            first_val[t] = upper
+        else:
+            top = first_idx[t] // grid_cols
+            left = first_idx[t] - top * grid_cols
+            first_val[t] = window_ssd(planes, top, left, oy, ox, weights, values, known)
+        best_raw = min(best_raw, first_val[t])
     reach = ((1.0 + tolerance) * (best_raw + s) + 1e-10 * norm) * (1.0 + 1e-9) + s
     limit = reach + offset
     limit += 1e-11 * (abs(limit) + abs(offset))  # the float64 rounding of ``bound``
@@ -242,10 +247,15 @@ def _choose_row(
     for k in range(count):
         if bound[k] <= limit:
             j = passed[k]
-            top = j // grid_cols
-            left = j - top * grid_cols
+            raw = -1.0
+            for t in range(n_exact):
+                if first_idx[t] == j:
+                    raw = first_val[t]
+            if raw < 0.0:
+                top = j // grid_cols
+                raw = window_ssd(planes, top, j - top * grid_cols, oy, ox, weights, values, known)
             index[n_in] = j
-            dist[n_in] = window_ssd(planes, top, left, oy, ox, weights, values, known) / norm
+            dist[n_in] = raw / norm
             best = min(best, dist[n_in])
             n_in += 1
     threshold = best * (1.0 + tolerance) + 1e-10
@@ -413,13 +423,81 @@ def _fill_batches(
     return stop, written
 
 
-def _tile_product(tile: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]) -> None:
-    """``out[:, c:c + BLOCK_COLUMNS] = lhs @ rhs[:, c:c + BLOCK_COLUMNS]`` (one single-thread
-    BLAS call: its bytes do not depend on the thread that runs it) and its block minima."""
-    lhs, rhs, out, minima, c = tile
-    cols = slice(c, min(c + BLOCK_COLUMNS, rhs.shape[1]))
-    np.matmul(lhs, rhs[:, cols], out=out[:, cols])
-    _block_minima(out, c, minima)
+@jit(nogil=True)
+def gather_windows(canvas, filled, rows, cols, window):  # pragma: no cover - compiled
+    """The windows of side ``window`` with top-left corners ``(rows[i], cols[i])`` of a
+    padded canvas ``(H, W, C)`` and of its mask: ``(m, w, w, C)`` values and ``(m, w, w)``
+    known (a copy, as ``sliding_window_view(...)[rows, cols]`` gives)."""
+    m, channels = rows.size, canvas.shape[2]
+    windows = np.empty((m, window, window, channels))
+    known = np.empty((m, window, window), np.bool_)
+    for i in range(m):
+        for y in range(window):
+            for x in range(window):
+                known[i, y, x] = filled[rows[i] + y, cols[i] + x]
+                for c in range(channels):
+                    windows[i, y, x, c] = canvas[rows[i] + y, cols[i] + x, c]
+    return windows, known
+
+
+@jit(nogil=True)
+def _disc_terms(windows, known, gauss, ring, mean, axes, column_max, ring_dy, ring_dx):  # pragma: no cover
+    """The left operand of :meth:`ScreenBank.screen` and what its bound needs, row by row.
+
+    For the disc pixels ``ring`` (flat indices in the window, in angle order) of every
+    window: ``a`` the Gaussian weight where known (else 0), ``x`` the values centred on
+    ``mean`` and projected on ``axes`` (0 where unknown). Returns ``left[i, p] = [a, -2 a
+    x_0, -2 a x_1...]``, ``constant[i] = sum_p a ||x||^2``, ``size[i] = sum |left| *
+    column_max`` (bounds ``sum |A| |B|`` of the product), ``present[i, p] = a > 0`` and the
+    group ``0..3`` of the direction of the centroid of the known disc pixels.
+    """
+    m, w = known.shape[0], known.shape[1]
+    channels = windows.shape[3]
+    pixels, n_axes = ring.size, axes.shape[1]
+    left = np.zeros((m, pixels, n_axes + 1))
+    constant = np.zeros(m)
+    size = np.zeros(m)
+    present = np.zeros((m, pixels), np.bool_)
+    group = np.zeros(m, np.int64)
+    for i in range(m):
+        cy = 0.0
+        cx = 0.0
+        for p in range(pixels):
+            y = ring[p] // w
+            x = ring[p] - y * w
+            if not known[i, y, x]:
+                continue
+            a = gauss[y, x]
+            if not a > 0:
+                continue
+            present[i, p] = True
+            cy += ring_dy[p]
+            cx += ring_dx[p]
+            left[i, p, 0] = a
+            size[i] += a * column_max[p * (n_axes + 1)]
+            squares = 0.0
+            for k in range(n_axes):
+                v = 0.0
+                for c in range(channels):
+                    v += (windows[i, y, x, c] - mean[c]) * axes[c, k]
+                squares += v * v
+                left[i, p, k + 1] = -2.0 * a * v
+                size[i] += abs(left[i, p, k + 1]) * column_max[p * (n_axes + 1) + k + 1]
+            constant[i] += a * squares
+        angle = np.arctan2(cy, cx)
+        group[i] = int(np.floor((angle + 1.25 * np.pi) / (0.5 * np.pi))) % 4
+    return left, constant, size, present, group
+
+
+def _tile_products(task: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, range]) -> None:
+    """``out[:, c:c + BLOCK_COLUMNS] = lhs @ rhs[:, c:c + BLOCK_COLUMNS]`` and its block
+    minima for every ``c`` of the task: each tile is one single-thread BLAS call, whose
+    bytes do not depend on the thread that runs it."""
+    lhs, rhs, out, minima, starts = task
+    for c in starts:
+        cols = slice(c, min(c + BLOCK_COLUMNS, rhs.shape[1]))
+        np.matmul(lhs, rhs[:, cols], out=out[:, cols])
+        _block_minima(out, c, minima)
 
 
 class WindowScreen:
@@ -569,16 +647,18 @@ class ScreenBank:
             :meth:`buffers` of at least ``k`` rows, which the result then uses (a caller
             that screens many times reuses them, rather than new pages each time).
         """
-        k, channels = windows.shape[0], windows.shape[3]
-        a = (known * self.gauss).reshape(k, -1)[:, self.ring]
-        x = (windows.reshape(k, -1, channels)[:, self.ring, :] - self.mean) @ self.axes
-        x = np.where(a[..., None] > 0, x, 0.0)
-        left = np.concatenate([a[..., None], -2.0 * a[..., None] * x], axis=2)
-        constant = np.sum(a * np.sum(x * x, axis=2), axis=1)
-        size = np.abs(left).reshape(k, -1) @ self.column_max
-        present = a > 0
-        angle = np.arctan2(present @ self.ring_dy, present @ self.ring_dx)
-        group = np.floor((angle + 1.25 * np.pi) / (0.5 * np.pi)).astype(np.int64) % 4
+        k = windows.shape[0]
+        left, constant, size, present, group = _disc_terms(
+            windows,
+            known,
+            self.gauss,
+            self.ring,
+            self.mean,
+            self.axes,
+            self.column_max,
+            self.ring_dy,
+            self.ring_dx,
+        )
         order = np.argsort(group, kind="stable")
         position = np.empty(k, np.int64)
         position[order] = np.arange(k)
@@ -590,7 +670,7 @@ class ScreenBank:
         grouped, minima = out[0][:k], out[1][:k]
         padded = grouped.shape[1]
         columns = np.zeros(k)
-        tiles = []
+        tasks = []
         for g in range(4):
             rows = order[starts[g] : starts[g + 1]]
             if rows.size == 0:
@@ -601,9 +681,14 @@ class ScreenBank:
             rhs = self.bank[start * self.features : (start + length) * self.features]
             band = slice(starts[g], starts[g + 1])
             columns[rows] = lhs.shape[1]
-            tiles += [(lhs, rhs, grouped[band], minima[band], c) for c in range(0, padded, BLOCK_COLUMNS)]
+            # two tasks a group: few hand-overs to the pool, both cores busy
+            half = -(-padded // (2 * BLOCK_COLUMNS)) * BLOCK_COLUMNS
+            tasks += [
+                (lhs, rhs, grouped[band], minima[band], range(c, min(c + half, padded), BLOCK_COLUMNS))
+                for c in (0, half)
+            ]
         with fixed_order():
-            parallel_map(_tile_product, tiles)
+            parallel_map(_tile_products, tasks)
         n = columns + 3.0
         margin = 1.01 * n * _U32 / (1.0 - n * _U32) * size + 1e-9 * (size + constant)
         return WindowScreen(grouped, position, minima, margin - constant, known.copy(), n_windows)
