@@ -306,7 +306,7 @@ class _Chunks:
         windows, known = gather_windows(canvas.values, canvas.filled, rows, cols, 2 * canvas.r + 1)
         room = self.buffers[chunk % 2]
         if room is None or room[0].shape[0] < rows.size:
-            room = self.buffers[chunk % 2] = self.sampler.screen_buffers(max(rows.size, 2 * self.size))
+            room = self.buffers[chunk % 2] = self.sampler.screen_buffers(max(rows.size, self.size))
         return self.background.submit(self.sampler.screen, windows, known, room)
 
     def screen(self, chunk: int, canvas: _Canvas) -> Any:
