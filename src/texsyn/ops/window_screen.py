@@ -180,19 +180,36 @@ def _choose_row(
         if stage == 0:
             n_new = known
     s = spread * scale
-    # the window of smallest bound: its exact distance is at least the best one
-    smallest = 0
-    for b in range(1, minima.size):
-        if minima[b] < minima[smallest]:
-            smallest = b
-    base = (smallest // lanes) * BLOCK_COLUMNS + smallest % lanes
-    first = base
-    for k in range(_BLOCK):
-        if lower[base + k * lanes] == minima[smallest]:
-            first = base + k * lanes
+    # the windows of smallest bound in the ``n_first`` blocks of smallest minimum: the
+    # least of their exact distances (``upper``) is at least the best distance
+    block_val = np.full(n_first, np.inf)
+    block_idx = np.zeros(n_first, np.int64)
+    for b in range(minima.size):
+        v = minima[b]
+        if v < block_val[n_first - 1]:
+            p = n_first - 1
+            while p > 0 and block_val[p - 1] > v:
+                block_val[p] = block_val[p - 1]
+                block_idx[p] = block_idx[p - 1]
+                p -= 1
+            block_val[p] = v
+            block_idx[p] = b
+    upper = np.inf
+    first = 0
+    for t in range(n_first):
+        if not block_val[t] < np.inf:
             break
-    top = first // grid_cols
-    upper = window_ssd(planes, top, first - top * grid_cols, oy, ox, weights, values, known)
+        base = (block_idx[t] // lanes) * BLOCK_COLUMNS + block_idx[t] % lanes
+        j = base
+        for k in range(_BLOCK):
+            if lower[base + k * lanes] == block_val[t]:
+                j = base + k * lanes
+                break
+        top = j // grid_cols
+        exact = window_ssd(planes, top, j - top * grid_cols, oy, ox, weights, values, known)
+        if exact < upper:
+            upper = exact
+            first = j
     # a candidate of the product's rule has a true distance below ``reach`` (raw units)
     reach = ((1.0 + tolerance) * (upper + s) + 1e-10 * norm) * (1.0 + 1e-9) + s
     cut = reach + offset
