@@ -624,10 +624,13 @@ class ScreenBank:
         stacked = np.concatenate([np.sum(centred * centred, axis=2)[..., None], centred], axis=2)
         self.features = stacked.shape[2]
         stacked = stacked.reshape(n, -1)
-        self.column_max = np.abs(stacked).max(axis=0)
-        band = stacked.T.astype(np.float32)
-        self.bank = np.ascontiguousarray(np.concatenate([band, band], axis=0))
-        self.value_max = np.abs(patches).max(axis=0).reshape(window, window, channels)
+        # largest magnitudes without an absolute-value copy of the arrays
+        self.column_max = np.maximum(stacked.max(axis=0), -stacked.min(axis=0))
+        self.bank = np.empty((2 * stacked.shape[1], n), np.float32)
+        self.bank[: stacked.shape[1]] = stacked.T
+        self.bank[stacked.shape[1] :] = self.bank[: stacked.shape[1]]
+        value_max = np.maximum(patches.max(axis=0), -patches.min(axis=0))
+        self.value_max = value_max.reshape(window, window, channels)
         self.grid_cols = exemplar.shape[1] - window + 1
         self.planes = np.ascontiguousarray(np.moveaxis(exemplar, 2, 0))
 
