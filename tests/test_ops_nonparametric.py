@@ -130,6 +130,51 @@ def test_screen_bounds_every_distance_from_below(colour_exemplar):
     assert not CoherentSampler(sampler, 0.5).screens  # its own match: never screened
 
 
+def test_screen_groups_rows_by_known_arc_and_keeps_block_minima(colour_exemplar):
+    # the bounds are computed by groups of rows (the arc of the disc they know); each row's
+    # block minima are the minima of its strided blocks, and the padding never passes
+    sampler = NonParametricSampler(colour_exemplar, 9)
+    rng = np.random.default_rng(6)
+    windows = rng.random((40, 9, 9, 3))
+    known = np.zeros((40, 9, 9), bool)
+    for i, side in enumerate(rng.integers(0, 4, 40)):  # half-known windows, as at the front
+        np.rot90(known[i], side)[:4] = True
+    screen = sampler.screen(windows, known)
+    n = sampler.n_windows
+    assert sorted(screen.position.tolist()) == list(range(40))
+    np.testing.assert_array_equal(screen.lower, screen.grouped[screen.position, :n])
+    assert np.all(np.isinf(screen.grouped[:, n:]))
+    lanes = window_screen.BLOCK_COLUMNS // window_screen._BLOCK
+    tiles = screen.grouped.reshape(40, -1, window_screen._BLOCK, lanes)
+    np.testing.assert_array_equal(screen.minima, tiles.min(axis=2).reshape(40, -1))
+    # the same bounds as one product over the whole disc, up to float32 rounding
+    full = sampler.bank.distances(
+        windows.reshape(40, -1),
+        np.broadcast_to((known * sampler.gauss)[..., None], windows.shape).reshape(40, -1),
+    )
+    assert np.all(screen.lower.astype(np.float64) - screen.offset[:, None] <= full)
+
+
+def test_covering_arc_is_the_shortest_cyclic_run():
+    arc = window_screen._covering_arc
+    assert arc(np.array([0, 1, 1, 0, 0, 0], bool)) == (1, 2)
+    assert arc(np.array([1, 0, 0, 0, 1, 1], bool)) == (4, 3)  # wraps around
+    assert arc(np.array([0, 0, 1, 0, 0, 0], bool)) == (2, 1)
+    assert arc(np.ones(5, bool))[1] == 5
+    assert arc(np.zeros(5, bool)) == (0, 1)
+
+
+def test_gather_windows_copies_the_sliding_windows():
+    rng = np.random.default_rng(8)
+    canvas = rng.random((20, 22, 3))
+    filled = rng.random((20, 22)) < 0.5
+    rows, cols = rng.integers(0, 14, 9), rng.integers(0, 16, 9)
+    windows, known = window_screen.gather_windows(canvas, filled, rows, cols, 7)
+    view = np.lib.stride_tricks.sliding_window_view(canvas, (7, 7), axis=(0, 1))[rows, cols]
+    np.testing.assert_array_equal(windows, np.moveaxis(view, 1, 3))
+    np.testing.assert_array_equal(known, np.lib.stride_tricks.sliding_window_view(filled, (7, 7))[rows, cols])
+
+
 # --------------------------------------------------------- the approximate search (issue 20)
 def _approximate_search_error(exemplar, window, shape, k):
     """(chosen exact distance, exact best) per accepted pixel of an approximate growth, both

@@ -43,6 +43,7 @@ from ..ops.canvas import padded_canvas
 from ..ops.kcoherence import CoherentWindows
 from ..ops.nonparametric import NonParametricSampler, schedule_batches
 from ..ops.progress import Reporter
+from ..ops.window_screen import gather_windows
 
 __all__ = [
     "Block",
@@ -288,10 +289,15 @@ class _Chunks:
         The pass's pixels in batch order.
     size : int
         Pixels per chunk, about.
+    buffers : list
+        Two places for bounds (``sampler.screen_buffers``, or None until needed), used by
+        the even and the odd chunks: a chunk's bounds are computed while the previous
+        chunk's are in use, and the pages are reused from pass to pass.
     """
 
-    def __init__(self, sampler, background, bounds, rows, cols, size):
+    def __init__(self, sampler, background, bounds, rows, cols, size, buffers):
         self.sampler, self.background, self.bounds = sampler, background, bounds
+        self.buffers, self.size = buffers, size
         self.rows, self.cols = rows, cols
         n_batches = bounds.size - 1
         firsts = [0]
@@ -299,28 +305,25 @@ class _Chunks:
             reach = int(np.searchsorted(bounds, bounds[firsts[-1]] + size, "right")) - 1
             firsts.append(min(n_batches, max(firsts[-1] + 1, reach)))
         self.firsts = firsts
-        self.chunk = -1
-        self.current: Any = None
         self.upcoming: Any = None
 
-    def _submit(self, chunk: int, value_windows: np.ndarray, known_windows: np.ndarray) -> Any:
+    def _submit(self, chunk: int, canvas: _Canvas) -> Any:
         if chunk >= len(self.firsts) - 1:
             return None
         span = slice(self.bounds[self.firsts[chunk]], self.bounds[self.firsts[chunk + 1]])
         rows, cols = self.rows[span], self.cols[span]
-        windows = np.moveaxis(value_windows[rows, cols], 1, 3)
-        return self.background.submit(self.sampler.screen, windows, known_windows[rows, cols])
+        windows, known = gather_windows(canvas.values, canvas.filled, rows, cols, 2 * canvas.r + 1)
+        room = self.buffers[chunk % 2]
+        if room is None or room[0].shape[0] < rows.size:
+            room = self.buffers[chunk % 2] = self.sampler.screen_buffers(max(rows.size, self.size))
+        return self.background.submit(self.sampler.screen, windows, known, room)
 
-    def screen(self, batch: int, value_windows: np.ndarray, known_windows: np.ndarray) -> tuple[Any, slice]:
-        """The bounds of ``batch``'s chunk and the rows of ``batch`` in them."""
-        if self.chunk + 1 < len(self.firsts) - 1 and batch >= self.firsts[self.chunk + 1]:
-            self.chunk += 1
-            if self.upcoming is None:
-                self.upcoming = self._submit(self.chunk, value_windows, known_windows)
-            self.current = self.upcoming.result()
-            self.upcoming = self._submit(self.chunk + 1, value_windows, known_windows)
-        start = self.bounds[self.firsts[self.chunk]]
-        return self.current, slice(self.bounds[batch] - start, self.bounds[batch + 1] - start)
+    def screen(self, chunk: int, canvas: _Canvas) -> Any:
+        """The bounds of chunk ``chunk`` (the chunks are asked for in order); the next
+        chunk's are started in the background."""
+        current = self.upcoming if self.upcoming is not None else self._submit(chunk, canvas)
+        self.upcoming = self._submit(chunk + 1, canvas)
+        return current.result()
 
 
 def grow_pixels(
@@ -475,10 +478,14 @@ class _ExactPass:
     def __init__(self, sampler: NonParametricSampler, canvas: _Canvas, background, max_batch: int):
         self.sampler, self.canvas, self.background = sampler, canvas, background
         self.batch_cap = int(max(8, min(max_batch, (1 << 23) // max(sampler.n_windows, 1))))
-        # small chunks: the matching waits only for a pass's first one, and later ones are
-        # computed from a more recent state (tighter bounds)
-        self.screen_rows = max(128, (1 << 21) // max(sampler.n_windows, 1))
+        # chunks of about 300 rows (colour 128 x 128 exemplar): the matching waits only for
+        # a pass's first one, later ones are computed from a recent state (tight bounds),
+        # and each group of a chunk's product has rows enough to amortise the packing of
+        # the bank (measured: 150 rows 4.1 s of CPU, 300 rows 3.6 s, the main thread 1.0
+        # and 1.3 s; docs/methods/efros_leung.md, "Performance")
+        self.screen_rows = max(128, (1 << 22) // max(sampler.n_windows, 1))
         self.screened = sampler.screens
+        self.buffers: list = [None, None]
 
     def __call__(self, rows, cols, uniforms, tolerance: float, threshold: float) -> int:
         sampler, canvas, r = self.sampler, self.canvas, self.canvas.r
@@ -486,32 +493,48 @@ class _ExactPass:
         batch_of, n_batches = schedule_batches(rows, cols, r, height, width, self.batch_cap)
         by_batch = np.argsort(batch_of, kind="stable")
         bounds = np.searchsorted(batch_of[by_batch], np.arange(n_batches + 1))
-        if self.screened:
-            chunks = _Chunks(
-                sampler, self.background, bounds, rows[by_batch], cols[by_batch], self.screen_rows
+        rows, cols, uniforms = rows[by_batch], cols[by_batch], uniforms[by_batch]
+        if not self.screened:
+            return sum(
+                self._match(rows, cols, uniforms, bounds, b, tolerance, threshold) for b in range(n_batches)
             )
+        chunks = _Chunks(sampler, self.background, bounds, rows, cols, self.screen_rows, self.buffers)
+        pixels = (rows, cols, uniforms, bounds)
         filled_now = 0
-        for b in range(n_batches):
-            start, end = int(bounds[b]), int(bounds[b + 1])
-            members = by_batch[start:end]
-            pr, pc = rows[members], cols[members]
-            windows, known = np.moveaxis(canvas.value_windows[pr, pc], 1, 3), canvas.known_windows[pr, pc]
-            if self.screened:
-                screen, rows_now = chunks.screen(b, canvas.value_windows, canvas.known_windows)
-                src, _, ok = sampler.match_screened(
-                    windows, known, tolerance, uniforms[members], screen, rows_now, threshold
+        for chunk in range(len(chunks.firsts) - 1):
+            screen = chunks.screen(chunk, canvas)
+            batch, stop = chunks.firsts[chunk], chunks.firsts[chunk + 1]
+            while batch < stop:
+                batch, written = sampler.fill_screened(
+                    canvas.values,
+                    canvas.filled,
+                    canvas.source,
+                    pixels,
+                    (batch, stop),
+                    screen,
+                    int(bounds[chunks.firsts[chunk]]),
+                    tolerance,
+                    threshold,
                 )
-            else:
-                src, err = sampler.match(windows, known, tolerance, uniforms[members])
-                ok = err <= threshold
-            if not np.any(ok):
-                continue
-            pr, pc, src = pr[ok], pc[ok], src[ok]
-            canvas.values[pr + r, pc + r] = sampler.exemplar[src[:, 0], src[:, 1]]
-            canvas.filled[pr + r, pc + r] = True
-            canvas.source[pr, pc] = src
-            filled_now += int(ok.sum())
+                filled_now += written
+                if batch < stop:  # rounding could matter: the matrix-product search
+                    filled_now += self._match(rows, cols, uniforms, bounds, batch, tolerance, threshold)
+                    batch += 1
         return filled_now
+
+    def _match(self, rows, cols, uniforms, bounds, batch: int, tolerance: float, threshold: float) -> int:
+        """Batch ``batch`` by :meth:`~texsyn.ops.nonparametric.NonParametricSampler.match`; pixels filled."""
+        sampler, canvas, r = self.sampler, self.canvas, self.canvas.r
+        members = slice(int(bounds[batch]), int(bounds[batch + 1]))
+        pr, pc = rows[members], cols[members]
+        windows, known = np.moveaxis(canvas.value_windows[pr, pc], 1, 3), canvas.known_windows[pr, pc]
+        src, err = sampler.match(windows, known, tolerance, uniforms[members])
+        ok = err <= threshold
+        pr, pc, src = pr[ok], pc[ok], src[ok]
+        canvas.values[pr + r, pc + r] = sampler.exemplar[src[:, 0], src[:, 1]]
+        canvas.filled[pr + r, pc + r] = True
+        canvas.source[pr, pc] = src
+        return int(ok.sum())
 
 
 class _ApproximatePass:

@@ -94,19 +94,20 @@ def nonparametric_bytes(
 
     The sampler keeps the stacked bank ``[patches^2, -2 patches]`` of all ``K`` windows of the
     ``h x w x c`` exemplar (``16 K w^2 c`` bytes) and the float32 bank of the exact search's
-    lower bounds (``4 K n``, ``n = |disc| (1 + min(c, 2))``). With ``output_shape=None`` the
-    transient is that of its construction (patch extraction and the squares); otherwise that
-    of growing a texture of that size: the padded canvas, its masks, one batch of searches,
-    whose size is bounded by the length of the growing front, and two chunks of float32 lower
-    bounds (``2 x 4 K`` bytes a row, ``max(128, 2^21 / K)`` rows or about a pass, whichever is
-    shorter; ``docs/methods/efros_leung.md``).
+    lower bounds, stored twice (``8 K n``, ``n = (|disc| - 1) (1 + min(c, 2))``). With
+    ``output_shape=None`` the transient is that of its construction (patch extraction and the
+    squares); otherwise that of growing a texture of that size: the padded canvas, its masks,
+    one batch of searches, whose size is bounded by the length of the growing front, and two
+    chunks of float32 lower bounds (``2 x 4 K'`` bytes a row, ``K'`` the window count rounded
+    up to 2048, ``max(128, 2^22 / K)`` rows or about a pass, whichever is shorter;
+    ``docs/methods/efros_leung.md``).
     """
     k = float(max(1, (h - window + 1) * (w - window + 1)))
     dim = float(window * window * c)
     grid = np.arange(window) - window // 2
     disc = float(np.count_nonzero(grid[:, None] ** 2 + grid[None, :] ** 2 <= 16))
-    screen = disc * (1 + min(c, 2))
-    kept = 16.0 * k * dim + 16.0 * k + 4.0 * k * screen + 16.0 * float(h * w * c)
+    screen = (disc - 1) * (1 + min(c, 2))
+    kept = 16.0 * k * dim + 16.0 * k + 8.0 * k * screen + 16.0 * float(h * w * c)
     if output_shape is None:
         return kept, 24.0 * k * dim
     oh, ow = output_shape[:2]
@@ -116,8 +117,9 @@ def nonparametric_bytes(
     batch = float(min(cap, max(8, (oh + ow) // (r + 1))))
     grow = padded * (8.0 * c + 33.0) + 16.0 * float(oh) * float(ow) + 64.0 * (oh + ow + 8 * r)
     grow += batch * (48.0 * dim + 16.0 * k + 24.0 * window * window)
-    chunk = float(min(max(128, (1 << 21) // int(k)), oh + ow))  # at most about a pass
-    grow += 2.0 * chunk * (4.0 * k + 16.0 * screen + 8.0 * dim) + 24.0 * k
+    chunk = float(min(max(128, (1 << 22) // int(k)), oh + ow))  # at most about a pass
+    columns = -(-k // 2048) * 2048  # the bounds and their minima by blocks of 64
+    grow += 2.0 * chunk * (4.0625 * columns + 16.0 * screen + 8.0 * dim) + 24.0 * k
     return kept, grow
 
 

@@ -51,7 +51,7 @@ class EfrosLeung(TextureSynthesizer):
         ``'exact'``: every exemplar window is compared (the paper). ``'approximate'``: only
         the windows continuing the sources of the pixel's filled 8-neighbours (Ashikhmin
         2001) and their ``k_coherence`` most similar windows (Tong et al. 2002), with exact
-        distances: 0.24 s instead of about 5 s of CPU for 128 -> 256 colour; about four
+        distances: 0.24 s instead of about 3.5 s of CPU for 128 -> 256 colour; about four
         choices in five are ones the exact search could make (measured in the docs).
     k_coherence : int
         Similar windows per continuation in the approximate search (ranked on the

@@ -175,7 +175,9 @@ class NonParametricSampler:
         """
         return type(self).match is NonParametricSampler.match
 
-    def screen(self, windows: np.ndarray, known: np.ndarray) -> WindowScreen:
+    def screen(
+        self, windows: np.ndarray, known: np.ndarray, out: tuple[np.ndarray, np.ndarray] | None = None
+    ) -> WindowScreen:
         """Float32 lower bounds of the distances of ``k`` windows, for :meth:`match_screened`
         (:meth:`texsyn.ops.window_screen.ScreenBank.screen`).
 
@@ -184,8 +186,14 @@ class NonParametricSampler:
         windows : ndarray, shape (k, w, w, C)
         known : ndarray of bool, shape (k, w, w)
             What is known of them now; it must stay known until they are matched.
+        out : (ndarray, ndarray), optional
+            :meth:`screen_buffers` of at least ``k`` rows, used by the result.
         """
-        return self._screen.screen(windows, known)
+        return self._screen.screen(windows, known, out)
+
+    def screen_buffers(self, rows: int) -> tuple[np.ndarray, np.ndarray]:
+        """Room for the bounds of up to ``rows`` windows (:meth:`screen`'s ``out``)."""
+        return self._screen.buffers(rows)
 
     def match_screened(
         self,
@@ -226,6 +234,37 @@ class NonParametricSampler:
             source, error = self.match(windows, known, tolerance, uniforms)
             return source, error, error <= accept
         return self.centres[choice], error, error <= accept
+
+    def fill_screened(
+        self,
+        canvas: np.ndarray,
+        filled: np.ndarray,
+        source: np.ndarray,
+        pixels: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+        batches: tuple[int, int],
+        screen: WindowScreen,
+        chunk_start: int,
+        tolerance: float,
+        accept: float,
+    ) -> tuple[int, int]:
+        """:meth:`match_screened` for consecutive batches of a pass, writing the output.
+
+        Each batch is chosen as :meth:`match_screened` chooses it and its accepted pixels
+        written (values, mask, source map), in one compiled loop
+        (:meth:`texsyn.ops.window_screen.ScreenBank.fill`, which gives the arguments);
+        it stops before a batch whose choice the rounding of :meth:`match` could change,
+        which the caller then searches with :meth:`match`.
+
+        Returns
+        -------
+        next : int
+            The batch to search with :meth:`match` (``batches[1]`` when none).
+        written : int
+            Pixels filled.
+        """
+        return self._screen.fill(
+            canvas, filled, source, pixels, batches, screen, chunk_start, self.centres, tolerance, accept
+        )
 
     def grow(
         self,
