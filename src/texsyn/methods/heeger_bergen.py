@@ -25,6 +25,7 @@ from ..ops.color import ColourSpace, colour_space
 from ..ops.fourier import periodic_smooth_decomposition
 from ..ops.histogram import HistogramMatcher
 from ..ops.progress import Reporter
+from ..ops.ranks import expect_ranks
 from ..transforms.steerable import SteerablePyramid
 from ._base import TextureSynthesizer
 from ._memory import output_bytes, shape_dims
@@ -142,6 +143,10 @@ class HeegerBergen(TextureSynthesizer):
         canvas = self._canvas(shape)
         pyramid = SteerablePyramid(canvas, self.n_scales, self.n_orientations)
         match_pixels, match_band = self.model_.matchers(pyramid)
+        # every iteration ranks every subband and the pixels, the noise once more
+        bands = sum(h * w for h, w in map(pyramid.band_shape, self.model_.band_keys))
+        pixels = canvas[0] * canvas[1]
+        expect_ranks(self.model_.channels * (self.n_iterations * (bands + pixels) + pixels))
         noise = match_pixels(rng.standard_normal(canvas + (self.model_.channels,)))
         image = alternate_projections(
             noise,
