@@ -201,6 +201,7 @@ def child_main(method: str, kind: str, sizes: str, repeats: str, textures: str, 
     # growth) would otherwise count them in that size's peak; loaded first, with the
     # compiled ranks, and the warm-up then loads the kernels the method uses
     import numba  # noqa: F401
+
     from texsyn.ops.histogram import match_sorted_rows
 
     match_sorted_rows(np.zeros((1, 2)), np.zeros((1, 2)))
