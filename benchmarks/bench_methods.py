@@ -19,8 +19,9 @@ Three parts, written to ``benchmarks/results.md`` with the machine line (issue 2
    first part measures), numba and its first kernel loaded before it (some methods load them
    only from some size on: they are the libraries' memory, not the method's), then ``fit``
    + ``sample`` ``--repeats`` times; median wall, CPU, and the peak resident set growth
-   over the warm-up (``VmHWM`` reset through ``/proc/self/clear_refs``). With it, the arithmetic the method needs (a model of its
-   dominant term, :data:`WORK`) over the time it takes: GFLOP/s.
+   over the warm-up (``VmHWM`` reset through ``/proc/self/clear_refs``, after the allocator
+   gave back what earlier runs freed: ``malloc_trim``). With it, the arithmetic the method
+   needs (a model of its dominant term, :data:`WORK`) over the time it takes: GFLOP/s.
 3. **Scaling**: 128 -> 256 ... 2048 colour in process, one run per size (slow methods stop
    at the first size over ``--scaling-budget`` seconds), with two log-log plots
    (``benchmarks/results/time_vs_size.png``, ``memory_vs_size.png``) and the growth per
@@ -174,6 +175,18 @@ def run_child(
     return [json.loads(line) for line in done.stdout.splitlines() if line.startswith("{")]
 
 
+def _release_freed() -> None:
+    """Give the memory the allocator keeps from freed arrays back to the system (glibc's
+    ``malloc_trim``), so that the next run's resident growth counts every array it touches,
+    not only those larger than what the warm-up and the previous runs freed."""
+    import ctypes
+
+    try:
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):  # not glibc
+        pass
+
+
 def _peak_reset() -> None:
     with open("/proc/self/clear_refs", "w") as fh:
         fh.write("5")
@@ -210,6 +223,7 @@ def child_main(method: str, kind: str, sizes: str, repeats: str, textures: str, 
     for size in (int(s) for s in sizes.split(",")):
         walls, cpus, peaks = [], [], []
         for r in range(int(repeats)):
+            _release_freed()
             base = _status_kib("VmRSS")
             _peak_reset()
             w0, c0 = time.perf_counter(), time.process_time()
