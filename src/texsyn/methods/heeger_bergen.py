@@ -28,7 +28,7 @@ from ..ops.progress import Reporter
 from ..ops.ranks import expect_ranks
 from ..transforms.steerable import SteerablePyramid
 from ._base import TextureSynthesizer
-from ._memory import output_bytes, shape_dims
+from ._memory import CALIBRATED_MARGIN, output_bytes, shape_dims
 
 __all__ = ["HeegerBergen"]
 
@@ -66,6 +66,7 @@ class HeegerBergen(TextureSynthesizer):
     """
 
     name = "heeger_bergen"
+    memory_margin = CALIBRATED_MARGIN
     summary = "Heeger-Bergen steerable-pyramid histogram matching"
     reference = "Heeger, Bergen, SIGGRAPH 1995; Briand et al., IPOL 2014"
 
