@@ -16,10 +16,12 @@ Three parts, written to ``benchmarks/results.md`` with the machine line (issue 2
    targets.
 2. **In process**: each case in a fresh interpreter that first runs a small warm-up of the
    method (imports, numba compilation and cache loading, thread pools: the start-up the
-   first part measures), then ``fit`` + ``sample`` ``--repeats`` times; median wall, CPU, and
-   the peak resident set growth over the warm-up (``VmHWM`` reset through
-   ``/proc/self/clear_refs``). With it, the arithmetic the method needs (a model of its
-   dominant term, :data:`WORK`) over the time it takes: GFLOP/s.
+   first part measures), numba and its first kernel loaded before it (some methods load them
+   only from some size on: they are the libraries' memory, not the method's), then ``fit``
+   + ``sample`` ``--repeats`` times; median wall, CPU, and the peak resident set growth
+   over the warm-up (``VmHWM`` reset through ``/proc/self/clear_refs``, after the allocator
+   gave back what earlier runs freed: ``malloc_trim``). With it, the arithmetic the method
+   needs (a model of its dominant term, :data:`WORK`) over the time it takes: GFLOP/s.
 3. **Scaling**: 128 -> 256 ... 2048 colour in process, one run per size (slow methods stop
    at the first size over ``--scaling-budget`` seconds), with two log-log plots
    (``benchmarks/results/time_vs_size.png``, ``memory_vs_size.png``) and the growth per
@@ -173,6 +175,18 @@ def run_child(
     return [json.loads(line) for line in done.stdout.splitlines() if line.startswith("{")]
 
 
+def _release_freed() -> None:
+    """Give the memory the allocator keeps from freed arrays back to the system (glibc's
+    ``malloc_trim``), so that the next run's resident growth counts every array it touches,
+    not only those larger than what the warm-up and the previous runs freed."""
+    import ctypes
+
+    try:
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):  # not glibc
+        pass
+
+
 def _peak_reset() -> None:
     with open("/proc/self/clear_refs", "w") as fh:
         fh.write("5")
@@ -194,10 +208,22 @@ def child_main(method: str, kind: str, sizes: str, repeats: str, textures: str, 
     warm = image[:side, :side]
     if method == "sparse":  # its multiscale fit needs enough patches at every scale
         warm = image
+    # numba and its code generator (about 130 MiB of resident memory once a first kernel is
+    # loaded) belong to the libraries, not to the method (docs/memory.md, "Not counted"): a
+    # method that loads them only from some size on (Heeger-Bergen's compiled ranks, cwt's
+    # growth) would otherwise count them in that size's peak; loaded first, with the
+    # compiled ranks, and the warm-up then loads the kernels the method uses
+    import numba  # noqa: F401
+
+    from texsyn.ops.histogram import match_sorted_rows
+
+    match_sorted_rows(np.zeros((1, 2)), np.zeros((1, 2)))
+
     texsyn.make_method(method).fit(warm).sample((WARM_SIZE, WARM_SIZE), rng=0)
     for size in (int(s) for s in sizes.split(",")):
         walls, cpus, peaks = [], [], []
         for r in range(int(repeats)):
+            _release_freed()
             base = _status_kib("VmRSS")
             _peak_reset()
             w0, c0 = time.perf_counter(), time.process_time()

@@ -125,3 +125,27 @@ def test_near_sym_filter_identities(name):
 def test_rejects_sizes_that_are_not_multiples():
     with pytest.raises(ValueError, match="multiples of 8"):
         DTCWT(3).forward(np.zeros((20, 24)))
+
+
+def test_blocked_filtering_and_tiled_copies_give_the_bytes_of_the_whole_arrays():
+    """The column filters work on tiled contiguous copies and on blocks of rows (cache-sized
+    temporaries for large images): the same values as one einsum of the whole gather."""
+    from texsyn.ops.patches import extend_index
+    from texsyn.transforms import dtcwt
+
+    rng = np.random.default_rng(4)
+    image = rng.standard_normal((300, 257))
+    view = image.T  # what a column filter moves first
+    assert np.array_equal(dtcwt._contiguous(view), np.ascontiguousarray(view))
+    assert dtcwt._contiguous(view).flags.c_contiguous
+    taps = rng.standard_normal(7)
+    index = extend_index(np.arange(257)[:, None] + 3 - np.arange(7)[None, :], 257)
+    moved = np.ascontiguousarray(view)
+    whole = np.einsum("rl...,l->r...", moved[index], taps)
+    assert np.array_equal(dtcwt._filter_rows(moved, index, taps), whole)
+    old = dtcwt._BLOCK_VALUES
+    try:
+        dtcwt._BLOCK_VALUES = 7 * 300 * 5  # blocks of 5 rows, a last one of 2
+        assert np.array_equal(dtcwt._filter_rows(moved, index, taps), whole)
+    finally:
+        dtcwt._BLOCK_VALUES = old

@@ -147,6 +147,34 @@ def test_numpy_and_compiled_rank_scatters_give_the_same_bytes(quantum):
     assert np.array_equal(compiled, expected)
 
 
+@pytest.mark.parametrize("pca", [False, True])
+def test_histogram_matcher_ranks_the_channels_together_with_the_bytes_of_one_at_a_time(pca):
+    """``HistogramMatcher`` ranks every channel in one ``match_sorted_rows`` call (rows over
+    the worker threads): the bytes of ``match_sorted`` channel by channel, ties included."""
+    from texsyn.ops import ColorPCA, HistogramMatcher
+    from texsyn.ops.histogram import hist_target, match_sorted
+
+    rng = np.random.default_rng(5)
+    reference = rng.random((40, 30, 3))
+    image = np.round(rng.standard_normal((23, 17, 3)) * 4) / 4  # many ties
+    axes = ColorPCA(reference) if pca else None
+    ref = axes.forward(reference) if pca else reference
+    sorted_values = [np.sort(ref[..., c], axis=None) for c in range(3)]
+    matcher = HistogramMatcher(sorted_values, 23 * 17, pca=axes)
+    coords = axes.forward(image) if pca else image
+    expected = np.stack(
+        [
+            match_sorted(coords[..., c], hist_target(23 * 17, v, presorted=True))
+            for c, v in enumerate(sorted_values)
+        ],
+        axis=-1,
+    )
+    expected = axes.inverse(expected) if pca else expected
+    assert np.array_equal(matcher(image), expected)
+    with pytest.raises(ValueError, match="target values"):
+        matcher(image[:5])
+
+
 def test_random_tie_break_is_lexsort():
     """``match_sorted(..., rng)`` orders equal values by a random key: the ranks of
     ``lexsort((random, values))``, computed from one sort and the ties only."""
@@ -161,3 +189,13 @@ def test_random_tie_break_is_lexsort():
         v[5::11] = np.nan
         keys = np.round(rng.random(v.size), 2)  # equal keys too: then by position
         assert np.array_equal(_rank_with_random_ties(v, keys), np.lexsort((keys, v)))
+
+
+def test_expect_ranks_loads_the_compiled_ranks_for_a_large_total_only():
+    """An iterative method announces its total (Heeger-Bergen): below the threshold the
+    choice stays call by call, from it the compiled kernels are loaded."""
+    from texsyn.ops.ranks import COMPILED_SCATTER_VALUES, compiled_ranks, expect_ranks
+
+    assert expect_ranks(10) == compiled_ranks(10)
+    assert expect_ranks(COMPILED_SCATTER_VALUES)
+    assert compiled_ranks(10)

@@ -16,6 +16,13 @@ import numpy as np
 
 __all__: list[str] = []
 
+#: ``memory_margin`` of the methods whose terms were checked against the measured peaks of
+#: ``benchmarks/bench_methods.py`` (128 -> 256 and 128 -> 1024 colour, resident growth after
+#: a warm-up): their terms count the arrays alive at the peak, so 5 % covers the allocator's
+#: slack and the estimate stays an upper bound within 25 % of the peak (``docs/memory.md``,
+#: "Estimate against measurement")
+CALIBRATED_MARGIN = 1.05
+
 
 def planned_exemplar_shape(image: Any) -> tuple[int, ...] | None:
     """The shape :func:`texsyn._validation.as_exemplar` would give ``image``, read without converting it.

@@ -42,7 +42,7 @@ from ..ops.linalg import fixed_order
 from ..ops.patches import as_channels
 from ..ops.progress import Reporter
 from ._base import TextureSynthesizer
-from ._memory import fft_search_terms, output_bytes, shape_dims
+from ._memory import CALIBRATED_MARGIN, fft_search_terms, output_bytes, pixel_count, shape_dims
 from ._params import ParamSpec
 from .multiscale_gaussian import MSLG, ZOOM_SIGMA  # noqa: F401  (round 1 imported ZOOM_SIGMA from here)
 from .single_scale_gaussian import (
@@ -89,6 +89,7 @@ class _LocalGaussianBase(TextureSynthesizer):
     has_source_map = False
     #: only ``histogram='none'`` streams; the class itself says no (its default is ``'match'``)
     streams_rows = _StreamsWithoutMatching()  # type: ignore[assignment]
+    memory_margin = CALIBRATED_MARGIN
     _model = "lg"
     # set by each subclass's __init__ (its signature is the parameter list)
     patch_size: int
@@ -137,7 +138,8 @@ class _LocalGaussianBase(TextureSynthesizer):
 
     def memory_terms(self, exemplar_shape, output_shape=None) -> dict[str, float]:
         """Exemplar spectra; the canvas, one FFT search and one local Gaussian (``docs/memory.md``)."""
-        terms, query = fft_search_terms(exemplar_shape, masks=9, fitting=output_shape is None)
+        # three overlap masks: the first row's blocks, the first column's and all the others
+        terms, query = fft_search_terms(exemplar_shape, masks=3, fitting=output_shape is None)
         if output_shape is None:
             return terms
         h, w, c = shape_dims(exemplar_shape)
@@ -147,7 +149,13 @@ class _LocalGaussianBase(TextureSynthesizer):
         # the search's transients are freed before the neighbours are gathered
         terms["one search or one local Gaussian"] = max(query, local_gaussian_bytes(m, n * n * c))
         terms["canvas"] = float(canvas[0]) * canvas[1] * (8.0 * c + 1.0)
-        terms["output image"] = output_bytes(c, output_shape)
+        if self.histogram == "match":
+            # the matched channels and their stack, and one channel's ranks, while the canvas
+            # is alive; the output's copies come after the canvas is freed and take less
+            # (20 C bytes a pixel)
+            terms["matched marginals"] = (16.0 * c + 8.0) * pixel_count(output_shape)
+        else:
+            terms["output image"] = output_bytes(c, output_shape)
         return terms
 
     def streaming_memory_terms(self, exemplar_shape, output_shape) -> dict[str, float]:

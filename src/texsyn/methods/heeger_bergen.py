@@ -25,9 +25,10 @@ from ..ops.color import ColourSpace, colour_space
 from ..ops.fourier import periodic_smooth_decomposition
 from ..ops.histogram import HistogramMatcher
 from ..ops.progress import Reporter
+from ..ops.ranks import expect_ranks
 from ..transforms.steerable import SteerablePyramid
 from ._base import TextureSynthesizer
-from ._memory import output_bytes, shape_dims
+from ._memory import CALIBRATED_MARGIN, output_bytes, shape_dims
 
 __all__ = ["HeegerBergen"]
 
@@ -65,6 +66,7 @@ class HeegerBergen(TextureSynthesizer):
     """
 
     name = "heeger_bergen"
+    memory_margin = CALIBRATED_MARGIN
     summary = "Heeger-Bergen steerable-pyramid histogram matching"
     reference = "Heeger, Bergen, SIGGRAPH 1995; Briand et al., IPOL 2014"
 
@@ -142,6 +144,10 @@ class HeegerBergen(TextureSynthesizer):
         canvas = self._canvas(shape)
         pyramid = SteerablePyramid(canvas, self.n_scales, self.n_orientations)
         match_pixels, match_band = self.model_.matchers(pyramid)
+        # every iteration ranks every subband and the pixels, the noise once more
+        bands = sum(h * w for h, w in map(pyramid.band_shape, self.model_.band_keys))
+        pixels = canvas[0] * canvas[1]
+        expect_ranks(self.model_.channels * (self.n_iterations * (bands + pixels) + pixels))
         noise = match_pixels(rng.standard_normal(canvas + (self.model_.channels,)))
         image = alternate_projections(
             noise,

@@ -43,7 +43,7 @@ from ..ops.progress import Reporter
 from ..transforms.pyramids import crop_to_multiple, gaussian_blur, zoom_in, zoom_out
 from ..transforms.steerable import SteerablePyramid, max_scales
 from ._base import TextureSynthesizer
-from ._memory import fft_search_bytes, output_bytes, shape_dims
+from ._memory import CALIBRATED_MARGIN, fft_search_bytes, output_bytes, shape_dims
 from .portilla_simoncelli import PortillaSimoncelli
 from .single_scale_gaussian import (
     PASTE,
@@ -114,6 +114,7 @@ class MSLG(TextureSynthesizer):
     """
 
     name = "mslg"
+    memory_margin = CALIBRATED_MARGIN
     summary = "Multiscale locally Gaussian patch sampling"
     reference = "Raad, Desolneux, Morel, JMIV 2016 (MSLG)"
     has_source_map = False
@@ -202,14 +203,19 @@ class MSLG(TextureSynthesizer):
         )
         _, _, query = fft_search_bytes(hc, wc, 2 * c if self.n_scales > 1 else c, masks=9)
         search = max(query, local_gaussian_bytes(m, n * n * c))
-        zoom = (280.0 if self.zoom_boundary == "symmetric" else 48.0) * c * canvas
-        if self.n_scales > 1:
-            terms["Fourier zoom-in of the finest scale"] = zoom + 8.0 * c * canvas / 4
-        terms["one search or one local Gaussian"] = search
+        # the zoom-in (symmetric: the mirror extension's spectrum, the zero-padded spectrum of
+        # four times its size, whose written quarter only is resident, its shifted copy and
+        # the inverse transform's two passes) is over before the finest scale is synthesised
+        zoom = (264.0 if self.zoom_boundary == "symmetric" else 48.0) * c * canvas
+        synthesis = canvas * (16.0 * c + 1.0) + output_bytes(c, output_shape)
         if self._matches_highpass():
-            terms["high-pass residual and its histogram"] = 64.0 * c * canvas
-        terms["canvas, low-pass and mask"] = canvas * (16.0 * c + 1.0)
-        terms["output image"] = output_bytes(c, output_shape)
+            synthesis += 64.0 * c * canvas  # the high-pass residual and its histogram
+        terms["one search or one local Gaussian"] = search
+        if self.n_scales > 1:
+            synthesis += 32.0 * c * canvas  # the zoomed low-pass (a view of the zoom's result)
+            terms["finest scale: the Fourier zoom-in, then the synthesis"] = max(zoom, synthesis)
+        else:
+            terms["canvas, mask, high-pass residual and output"] = synthesis
         if post is not None:
             terms["Portilla-Simoncelli refinement"] = sum(
                 post.memory_terms(exemplar_shape, output_shape).values()

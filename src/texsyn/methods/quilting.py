@@ -14,7 +14,7 @@ from ..ops.progress import Reporter
 from ..ops.seams import cut_mask
 from ..ops.search import FFTPatchSearch
 from ._base import TextureSynthesizer
-from ._memory import fft_search_terms, output_bytes, shape_dims
+from ._memory import CALIBRATED_MARGIN, fft_search_terms, output_bytes, shape_dims
 
 __all__ = ["Quilting"]
 
@@ -54,6 +54,7 @@ class Quilting(TextureSynthesizer):
     """
 
     name = "quilting"
+    memory_margin = CALIBRATED_MARGIN
     summary = "Efros-Freeman image quilting with minimum-error boundary cuts"
     reference = "Efros, Freeman, SIGGRAPH 2001"
     has_source_map = True

@@ -155,7 +155,7 @@ def clamp_neighbours(m: int, source: PatchSource, name: str) -> int:
 
 def local_gaussian_bytes(m: int, dim: int) -> float:
     """Gathered neighbour patches, the centred factor and a conditional draw of ``dim`` entries."""
-    return 24.0 * m * dim + 8.0 * m * m + 32.0 * dim
+    return 16.0 * m * dim + 8.0 * m * m + 32.0 * dim
 
 
 # ---------------------------------------------------------------------------- the steps

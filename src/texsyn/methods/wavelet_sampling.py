@@ -54,7 +54,7 @@ from ..ops.progress import Reporter
 from ..transforms.dtcwt import DTCWT, DTCWTPyramid
 from ..transforms.pyramids import crop_to_multiple
 from ._base import TextureSynthesizer
-from ._memory import nonparametric_bytes, output_bytes, shape_dims
+from ._memory import CALIBRATED_MARGIN, nonparametric_bytes, output_bytes, shape_dims
 
 __all__ = ["ComplexWaveletSampling", "propagate", "block_indices"]
 
@@ -170,6 +170,7 @@ class ComplexWaveletSampling(TextureSynthesizer):
     has_source_map = True
     source_map_exact = False
     deprecated_params = {"epsilon": "tolerance"}
+    memory_margin = CALIBRATED_MARGIN
 
     def __init__(
         self,
@@ -213,8 +214,9 @@ class ComplexWaveletSampling(TextureSynthesizer):
     def memory_terms(self, exemplar_shape, output_shape=None) -> dict[str, float]:
         """DT-CWT pyramids and the windows of the coarsest level; the output's pyramid and maps.
 
-        The filters of length ``m`` are applied by gathering ``m`` shifted copies of an image;
-        ``refine`` holds a zero-padded copy of one exemplar level and a copy of one output
+        The filters of length ``m`` gather ``m`` shifted copies of the rows of an image in
+        blocks of at most 2 MiB (:mod:`texsyn.transforms.dtcwt`), after a contiguous copy of
+        the image; ``refine`` holds a zero-padded copy of one exemplar level and a copy of one output
         source map (``docs/memory.md``).
         """
         h, w, c = shape_dims(exemplar_shape)
@@ -237,7 +239,9 @@ class ComplexWaveletSampling(TextureSynthesizer):
         if self.coherence > 0:  # CoherentSampler: the windows' values carry their sources
             terms["growth at the coarsest level"] += 16.0 * (top_h * top_w + grid[0] * grid[1])
         terms["coefficient maps"] = 16.0 * full * (1.0 / 3 + 4.0 / 4**self.levels + 1.5)
-        terms["one output pyramid and its inverse"] = pyramid / k * full + (8.0 * taps + 8.0) * full
+        side = float(max(grid) * q)  # the longest row a filter gathers
+        gathered = min(8.0 * taps * full, max(8.0 * 2**18, 8.0 * taps * side))
+        terms["one output pyramid and its inverse"] = pyramid / k * full + 16.0 * full + gathered
         terms["output planes"] = 8.0 * c * full + output_bytes(c, output_shape)
         if self.refine:  # the padded level-0 subbands of the exemplar, one level-0 source map
             terms["refinement"] = 24.0 * k + 4.0 * full

@@ -164,7 +164,9 @@ def local_gaussian(samples: np.ndarray) -> LocalGaussian:
     if m < 2:
         raise ValueError(f"a local Gaussian needs at least 2 samples, got {m}")
     mean = x.mean(axis=0)
-    return LocalGaussian(mean=mean, factor=(x - mean).T / np.sqrt(m - 1))
+    factor = (x - mean).T  # scaled in place: the same values and layout, one array fewer
+    factor /= np.sqrt(m - 1)
+    return LocalGaussian(mean=mean, factor=factor)
 
 
 @dataclass(frozen=True)

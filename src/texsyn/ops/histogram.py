@@ -281,7 +281,10 @@ class HistogramMatcher:
     """Impose fixed per-channel histograms, optionally along principal colour axes.
 
     The targets for ``n_values`` samples per channel are computed once (:func:`hist_target`), so an
-    iterative method can project at every step at the cost of one sort per channel.
+    iterative method can project at every step at the cost of one sort per channel; the
+    channels are ranked together, as the rows of one :func:`match_sorted_rows` call (split
+    over the worker threads; each row is ranked alone, so the bytes are those of
+    :func:`match_sorted` channel by channel).
 
     Parameters
     ----------
@@ -296,23 +299,28 @@ class HistogramMatcher:
 
     def __init__(self, sorted_values, n_values: int, *, pca: ColorPCA | None = None, method: str = "ot"):
         self.pca = pca
-        self.targets = [hist_target(n_values, v, method=method, presorted=True) for v in sorted_values]
+        self._stacked = np.empty((len(sorted_values), n_values))  # one row per channel
+        for c, values in enumerate(sorted_values):
+            self._stacked[c] = hist_target(n_values, values, method=method, presorted=True)
+        self.targets = list(self._stacked)
 
     def __call__(self, image: np.ndarray, rng: np.random.Generator | None = None) -> np.ndarray:
         """Matched copy of ``image`` (shape ``(..., C)``); ties broken at random with ``rng``."""
         coords = self.pca.forward(image) if self.pca is not None else np.asarray(image, dtype=np.float64)
         flat = coords.reshape(-1, coords.shape[-1])
+        if rng is None:  # match_sorted of every channel, the channels ranked as rows together
+            if flat.shape[0] != self._stacked.shape[1]:
+                raise ValueError(f"need {flat.shape[0]} target values, got {self._stacked.shape[1]}")
+            out = match_sorted_rows(flat.T, self._stacked).T.reshape(coords.shape)
+            return self.pca.inverse(out) if self.pca is not None else out
+        # match_sorted(..., rng) of every channel, ranked together
+        if any(target.size != flat.shape[0] for target in self.targets):
+            raise ValueError(f"need {flat.shape[0]} target values per channel")
+        ties = np.stack([rng.random(flat.shape[0]) for _ in self.targets])
+        order = _rank_with_random_ties(flat.T, ties)
         out = np.empty_like(flat)
-        if rng is None:
-            for c, target in enumerate(self.targets):
-                out[:, c] = match_sorted(flat[:, c], target)
-        else:  # match_sorted(..., rng) of every channel, ranked together
-            if any(target.size != flat.shape[0] for target in self.targets):
-                raise ValueError(f"need {flat.shape[0]} target values per channel")
-            ties = np.stack([rng.random(flat.shape[0]) for _ in self.targets])
-            order = _rank_with_random_ties(flat.T, ties)
-            for c, target in enumerate(self.targets):
-                out[order[c], c] = target
+        for c, target in enumerate(self.targets):
+            out[order[c], c] = target
         out = out.reshape(coords.shape)
         return self.pca.inverse(out) if self.pca is not None else out
 
