@@ -175,3 +175,21 @@ def test_isolated_seeds_take_the_first_equal_isolated_seed():
         equal[equal] = np.all(bank[col[equal]] == queries[equal], axis=1) & isolated[col[equal]]
         expected[equal] = col[equal]
     assert np.array_equal(best, expected) and np.any(best >= 0)
+
+
+def test_gather_wrapped_equals_the_numpy_gather():
+    """Wei-Levoy's wavefront queries: the compiled gather against the NumPy one, both parts."""
+    from texsyn.methods.wei_levoy import _gather, causal_offsets, square_offsets
+    from texsyn.ops.patches import gather_wrapped
+
+    rng = np.random.default_rng(5)
+    image, parent = rng.random((20, 17, 3)), rng.random((10, 9, 3))
+    ys, xs = rng.integers(0, 20, 30), rng.integers(0, 17, 30)
+    causal, square = causal_offsets(7), square_offsets(3)
+    q = np.empty((30, (len(causal) + len(square)) * 3))
+    gather_wrapped(image, ys, xs, causal, q)
+    gather_wrapped(parent, ys // 2, xs // 2, square, q, len(causal) * 3)
+    expected = np.concatenate(
+        [_gather(image, ys, xs, causal), _gather(parent, ys // 2, xs // 2, square)], axis=1
+    )
+    assert np.array_equal(q, expected)
