@@ -111,3 +111,85 @@ def test_patch_wavelet_fast_search_gives_the_index_bytes(monkeypatch):
     )
     assert np.array_equal(answers, plain.transform_.mean_features(first, second, 1, 2, 8))
     assert np.array_equal(t.mean_features(first, second, 1, 2, 8), answers)
+
+
+def test_query_terms_in_one_pass_equal_the_side_terms():
+    """The compiled query side of the bounds (``_bounded_prepare``) against its NumPy formulas."""
+    from texsyn.ops.search import _U32, _U64, _bounded_prepare, _bounded_seeds, _gamma
+
+    rng = np.random.default_rng(3)
+    bank = _bank(rng, 2048, 40)
+    index = BoundedNearestIndex(bank, dims=8, extra=8)
+    q = bank[rng.integers(0, 2048, 37)] + 0.02 * rng.standard_normal((37, 40))
+    seeds = rng.integers(-1, 2048, (37, 2))
+    bands = rng.random((37, 2, 3))
+    m, (dim, coords), dims = len(q), index.basis.shape, index.dims
+    centred = q - index.mean
+    full = centred @ index.basis
+    proj32, q_ext, band, terms = (
+        np.empty((m, dims + 1), np.float32), np.empty((m, coords - dims)), np.empty((m, 3)), np.empty((7, m))
+    )  # fmt: skip
+    state = [np.empty((2, m), np.int64), np.empty((2, m)), np.empty((2, m))]
+    keep = [np.empty((2, m, 8), np.int64), np.empty((2, m, 8)), np.empty((2, m), np.int64)]
+    gamma_x = 1.01 * _gamma(dim + 3, _U64)
+    _bounded_prepare(
+        centred, full, dims, _gamma(dims + 4, _U32), index._proj_max,
+        1.2 * (_U32 + np.sqrt(coords) * _gamma(dim + 3, _U64)) * index._sigma,
+        1.1 * (3.0 * np.sqrt(coords) * _gamma(dim + coords, _U64) + 4.0 * index._ortho + 4.0 * _U64),
+        bands, proj32, q_ext, terms, band, q, index.bank, seeds, gamma_x, *state, *keep,
+    )  # fmt: skip
+    p64 = full[:, :dims].astype(np.float32).astype(np.float64)
+    q_sq = np.einsum("kd,kd->k", p64, p64)
+    l_err = 2.5 * _gamma(dims + 4, _U32) * (np.sqrt(q_sq) + index._proj_max) ** 2 + 1e-300
+    reference = np.array([q_sq, l_err, *index._side_terms(centred, full)])
+    np.testing.assert_allclose(terms, reference, rtol=1e-9, atol=1e-12)
+    assert np.array_equal(proj32[:, :dims], full[:, :dims].astype(np.float32)) and np.all(
+        proj32[:, dims] == 1
+    )
+    assert np.array_equal(q_ext, full[:, dims:].astype(np.float32).astype(np.float64))
+    assert np.array_equal(band, bands.max(axis=1))
+    best_j, best_x, upper = np.empty(m, np.int64), np.empty(m), np.full(m, np.inf)
+    keep_j, keep_x, kept = np.empty((m, 8), np.int64), np.empty((m, 8)), np.empty(m, np.int64)
+    _bounded_seeds(q, index.bank, seeds, gamma_x, best_j, best_x, upper, keep_j, keep_x, kept)
+    assert np.array_equal(state[0][0], best_j) and np.array_equal(state[1][0], best_x)
+    assert np.array_equal(state[2], np.stack([upper, upper])) and np.all(state[0][1] == -1)
+    assert np.array_equal(keep[2], np.stack([kept, np.zeros(m, np.int64)]))
+
+
+def test_isolated_seeds_take_the_first_equal_isolated_seed():
+    from texsyn.ops.search import _isolated_seeds
+
+    rng = np.random.default_rng(4)
+    bank = rng.random((50, 6))
+    isolated = rng.random(50) < 0.7
+    seeds = rng.integers(-1, 50, (40, 2))
+    pick = rng.integers(0, 2, 40)
+    queries = bank[np.maximum(seeds[np.arange(40), pick], 0)].copy()
+    queries[::5] += 1e-3  # equal to no row
+    best = np.full(40, -1, dtype=np.int64)
+    _isolated_seeds(queries, bank, seeds, isolated, best)
+    expected = np.full(40, -1, dtype=np.int64)
+    for s in range(2):  # the former NumPy loop
+        col = seeds[:, s]
+        equal = (col >= 0) & (expected < 0)
+        equal[equal] = np.all(bank[col[equal]] == queries[equal], axis=1) & isolated[col[equal]]
+        expected[equal] = col[equal]
+    assert np.array_equal(best, expected) and np.any(best >= 0)
+
+
+def test_gather_wrapped_equals_the_numpy_gather():
+    """Wei-Levoy's wavefront queries: the compiled gather against the NumPy one, both parts."""
+    from texsyn.methods.wei_levoy import _gather, causal_offsets, square_offsets
+    from texsyn.ops.patches import gather_wrapped
+
+    rng = np.random.default_rng(5)
+    image, parent = rng.random((20, 17, 3)), rng.random((10, 9, 3))
+    ys, xs = rng.integers(0, 20, 30), rng.integers(0, 17, 30)
+    causal, square = causal_offsets(7), square_offsets(3)
+    q = np.empty((30, (len(causal) + len(square)) * 3))
+    gather_wrapped(image, ys, xs, causal, q)
+    gather_wrapped(parent, ys // 2, xs // 2, square, q, len(causal) * 3)
+    expected = np.concatenate(
+        [_gather(image, ys, xs, causal), _gather(parent, ys // 2, xs // 2, square)], axis=1
+    )
+    assert np.array_equal(q, expected)

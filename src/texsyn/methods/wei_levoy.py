@@ -41,7 +41,7 @@ import numpy as np
 from .._validation import OneOf, Range
 from ..drivers.coarse_to_fine import coarse_to_fine
 from ..errors import InputError
-from ..ops.patches import as_channels
+from ..ops.patches import as_channels, gather_wrapped
 from ..ops.progress import Reporter
 from ..ops.search import (
     BoundedNearestIndex,
@@ -302,9 +302,10 @@ class WeiLevoy(TextureSynthesizer):
             ys, xs = ys_all[ok], xs[ok]
             if ys.size == 0:
                 continue
-            q = _gather(out, ys, xs, self.causal_)
+            q = np.empty((ys.size, bank.shape[1]))  # the causal part, then the parent square
+            gather_wrapped(out, ys, xs, self.causal_, q)
             if parent is not None:
-                q = np.concatenate([q, _gather(parent, ys // 2, xs // 2, self.parent_)], axis=1)
+                gather_wrapped(parent, ys // 2, xs // 2, self.parent_, q, len(self.causal_) * out.shape[2])
             if tree is not None:
                 best = tree.nearest(q)
             elif index is not None:  # seeds: the continuations of the left and upper sources

@@ -5,11 +5,14 @@ from __future__ import annotations
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
+from .jit import jit
+
 __all__ = [
     "as_channels",
     "average_patches",
     "extend_index",
     "extract_patches",
+    "gather_wrapped",
     "overlap_add",
     "wrap_seam_ratio",
 ]
@@ -18,6 +21,45 @@ __all__ = [
 def as_channels(image: np.ndarray) -> np.ndarray:
     """View a ``(H, W)`` image as ``(H, W, 1)``; leave ``(H, W, C)`` unchanged."""
     return image[..., None] if image.ndim == 2 else image
+
+
+@jit()
+def _gather_wrapped(image, rows, cols, offsets, out, start):
+    h, w, channels = image.shape
+    for i in range(rows.shape[0]):
+        k = start
+        for o in range(offsets.shape[0]):
+            r = (rows[i] + offsets[o, 0]) % h
+            c = (cols[i] + offsets[o, 1]) % w
+            for ch in range(channels):
+                out[i, k] = image[r, c, ch]
+                k += 1
+
+
+def gather_wrapped(
+    image: np.ndarray,
+    rows: np.ndarray,
+    cols: np.ndarray,
+    offsets: np.ndarray,
+    out: np.ndarray,
+    start: int = 0,
+) -> None:
+    """Toroidal neighbourhood vectors of some pixels, written into columns of ``out``.
+
+    ``out[i, start + o C + c] = image[(rows[i] + dy_o) % H, (cols[i] + dx_o) % W, c]`` for
+    the offsets ``(dy_o, dx_o)`` in order: one compiled pass, for loops that gather a few
+    pixels' neighbourhoods many times (Wei and Levoy's wavefronts).
+
+    Parameters
+    ----------
+    image : ndarray, shape (H, W, C)
+    rows, cols : ndarray of int, shape (n,)
+    offsets : ndarray of int, shape (P, 2)
+    out : ndarray, shape (n, >= start + P C)
+    start : int
+        First column written.
+    """
+    _gather_wrapped(image, rows, cols, offsets, out, start)
 
 
 def extend_index(index: np.ndarray, size: int, mode: str = "symmetric") -> np.ndarray:

@@ -613,6 +613,65 @@ def _bounded_seeds(queries, bank, seeds, gamma_x, best_j, best_x, upper, keep_j,
 
 
 @jit(nogil=True)
+def _bounded_prepare(
+    centred, full, dims, gamma_l, proj_max, err_coefficient, eps_coefficient, bands, proj32, q_ext,
+    terms, band, queries, bank, seeds, gamma_x, best_j, best_x, upper, keep_j, keep_x, kept,
+):  # fmt: skip
+    """The query side of a :class:`BoundedNearestIndex` search, in one pass, and its seeds.
+
+    For every query: its float32 projection extended by 1 (``proj32``), its next coordinates
+    rounded through float32 (``q_ext``), ``terms`` = the squared norm of the float32
+    projection, the error bound of the float32 products, and the error bound of the
+    coordinates, the residual norms and their error bounds (the formulas of
+    :meth:`BoundedNearestIndex._side_terms`, whose error bounds hold for any order of the
+    sums), and ``band``, the largest of its bands' coefficients. Then
+    :func:`_bounded_seeds` for part 0, whose bound starts every other part.
+    """
+    m, coords = full.shape
+    n_ext = coords - dims
+    for i in range(m):
+        q_sq = 0.0
+        head = 0.0
+        for k in range(dims):
+            v = np.float32(full[i, k])
+            proj32[i, k] = v
+            q_sq += np.float64(v) * np.float64(v)
+            head += full[i, k] * full[i, k]
+        proj32[i, dims] = np.float32(1.0)
+        tail = 0.0
+        for k in range(n_ext):
+            v = full[i, dims + k]
+            q_ext[i, k] = np.float64(np.float32(v))
+            tail += v * v
+        size_sq = 0.0
+        for k in range(centred.shape[1]):
+            size_sq += centred[i, k] * centred[i, k]
+        root = np.sqrt(q_sq) + proj_max
+        res_err = np.sqrt(eps_coefficient * size_sq) + 1e-300
+        terms[0, i] = q_sq
+        terms[1, i] = 2.5 * gamma_l * root * root + 1e-300
+        terms[2, i] = err_coefficient * np.sqrt(size_sq)
+        terms[3, i] = np.sqrt(max(size_sq - head, 0.0))
+        terms[4, i] = res_err
+        terms[5, i] = np.sqrt(max(size_sq - head - tail, 0.0))
+        terms[6, i] = res_err
+        for c in range(3):
+            top = bands[i, 0, c]
+            for t in range(1, bands.shape[1]):
+                top = max(top, bands[i, t, c])
+            band[i, c] = top
+    upper[0, :] = np.inf
+    _bounded_seeds(
+        queries, bank, seeds, gamma_x, best_j[0], best_x[0], upper[0], keep_j[0], keep_x[0], kept[0]
+    )
+    for p in range(1, upper.shape[0]):
+        upper[p, :] = upper[0, :]
+        best_j[p, :] = -1
+        best_x[p, :] = np.inf
+        kept[p, :] = 0
+
+
+@jit(nogil=True)
 def _bounded_chunk(
     gram, lo, queries, bank, seeds, q_sq, q_err, l_err, q_res, q_res_err, q_ext, q_res2, q_res2_err,
     b_res, b_res2, b_ext, b_errors, sigma, gamma_x, gamma_e, band, best_j, best_x, upper, keep_j,
@@ -1050,28 +1109,28 @@ class BoundedNearestIndex:
         edges = [16 * (k * p // (16 * n_parts)) for p in range(n_parts)] + [k]
         centred = q - self.mean
         full = centred @ self.basis
-        proj32 = np.ones((m, self.dims + 1), dtype=np.float32)
-        proj32[:, : self.dims] = full[:, : self.dims]
-        p64 = proj32[:, : self.dims].astype(np.float64)
-        q_sq = np.einsum("kd,kd->k", p64, p64)
-        l_err = 2.5 * _gamma(self.dims + 4, _U32) * (np.sqrt(q_sq) + self._proj_max) ** 2 + 1e-300
-        q_err, q_res, q_res_err, q_res2, q_res2_err = self._side_terms(centred, full)
-        q_ext = np.ascontiguousarray(full[:, self.dims :].astype(np.float32).astype(np.float64))
-        band = np.ascontiguousarray(bands.max(axis=1))  # a band above every band given
+        dim, coords = self.basis.shape
+        proj32 = np.empty((m, self.dims + 1), dtype=np.float32)
+        q_ext = np.empty((m, coords - self.dims))
+        band = np.empty((m, 3))
+        terms = np.empty((7, m))  # q_sq, l_err, q_err, q_res, q_res_err, q_res2, q_res2_err
         best_j = np.empty((n_parts, m), dtype=np.int64)
         best_x = np.empty((n_parts, m))
-        upper = np.full((n_parts, m), np.inf)
+        upper = np.empty((n_parts, m))
         keep_j = np.empty((n_parts, m, self.capacity), dtype=np.int64)
         keep_x = np.empty((n_parts, m, self.capacity))
         kept = np.empty((n_parts, m), dtype=np.int64)
         overflow = np.zeros((n_parts, m), dtype=np.bool_)
-
-        # the seeds, once: their rows are kept by part 0, their bound starts every part
-        _bounded_seeds(
-            q, self.bank, seeds, gamma_x, best_j[0], best_x[0], upper[0], keep_j[0], keep_x[0], kept[0]
-        )
-        upper[1:] = upper[0]
-        best_j[1:], best_x[1:], kept[1:] = -1, np.inf, 0
+        # the query's side of the bounds (:meth:`_side_terms`, the same formulas), and the
+        # seeds, once: their rows are kept by part 0, their bound starts every part
+        _bounded_prepare(
+            centred, full, self.dims, _gamma(self.dims + 4, _U32), self._proj_max,
+            1.2 * (_U32 + np.sqrt(coords) * _gamma(dim + 3, _U64)) * self._sigma,
+            1.1 * (3.0 * np.sqrt(coords) * _gamma(dim + coords, _U64) + 4.0 * self._ortho + 4.0 * _U64),
+            bands, proj32, q_ext, terms, band,
+            q, self.bank, seeds, gamma_x, best_j, best_x, upper, keep_j, keep_x, kept,
+        )  # fmt: skip
+        q_sq, l_err, q_err, q_res, q_res_err, q_res2, q_res2_err = terms
 
         def search_part(p: int) -> None:
             lo, hi = edges[p], edges[p + 1]
@@ -1120,6 +1179,25 @@ def nearest_rows_band(queries: np.ndarray, bank_norm_max: float) -> np.ndarray:
     return 2.0 * 2.2 * _gamma(queries.shape[1] + 2, _U64) * (bank_norm_max + q_norm) ** 2
 
 
+@jit()
+def _isolated_seeds(queries, bank, seeds, isolated, best):
+    """``best[i] = seeds[i, s]`` for the first seed ``s`` whose row equals query ``i`` and is
+    ``isolated`` (queries with ``best[i] >= 0`` and seeds ``-1`` are passed over)."""
+    m, n_seeds = seeds.shape
+    for s in range(n_seeds):
+        for i in range(m):
+            j = seeds[i, s]
+            if j < 0 or best[i] >= 0 or not isolated[j]:
+                continue
+            equal = True
+            for t in range(queries.shape[1]):
+                if bank[j, t] != queries[i, t]:
+                    equal = False
+                    break
+            if equal:
+                best[i] = j
+
+
 def nearest_rows_bounded(
     queries: np.ndarray,
     bank: np.ndarray,
@@ -1156,11 +1234,7 @@ def nearest_rows_bounded(
     best = np.full(queries.shape[0], -1, dtype=np.int64)
     if seeds is not None and isolated is not None:
         seeds = np.asarray(seeds, dtype=np.int64).reshape(queries.shape[0], -1)
-        for s in range(seeds.shape[1]):
-            col = seeds[:, s]
-            equal = (col >= 0) & (best < 0)
-            equal[equal] = np.all(bank[col[equal]] == queries[equal], axis=1) & isolated[col[equal]]
-            best[equal] = col[equal]
+        _isolated_seeds(queries, bank, np.ascontiguousarray(seeds), isolated, best)
     rest = np.flatnonzero(best < 0)
     if rest.size:
         sub_seeds = None if seeds is None else seeds[rest]
