@@ -95,12 +95,14 @@ def project_statistics(
         real_spectra = _real_band_spectra(bands[s], spectra, target, pyramid, s, lags, workspace)
         if s > 0:  # the parents of the next finer scale (the complex bands are not needed)
             spectra[s] = real_spectra * pyramid.half_planes[s]
-        image = pyramid.reconstruct_level(image, None, s, real_spectra=real_spectra)
+            image = pyramid.reconstruct_level(image, None, s, real_spectra=real_spectra)
+        else:  # the finest scale has no finer one: half spectra (rfft2) are enough
+            image = pyramid.reconstruct_level_half(image, real_spectra)
         image = impose_lowpass_statistics(
             image, target.low_autocorr[s], target.low_skew_kurt[:, s], pixel_var, lags
         )
     shrink = highpass_shrink_factor(highpass, target.highpass_variance)
-    x = pyramid.reconstruct_spectrum(image, highpass, shrink)
+    x = pyramid.reconstruct_spectrum_half(image, highpass, shrink)
     return impose_pixel_statistics(x, target)
 
 
@@ -114,7 +116,8 @@ def _real_band_spectra(
     workspace: dict | None,
 ) -> np.ndarray:
     """Impose the statistics of scale ``s`` on its complex bands (paper section 4); the Fourier
-    transforms of their new real parts.
+    transforms of their new real parts (at the finest scale, ``s = 0``, their half spectra:
+    ``rfft2``).
 
     The magnitudes' covariance across orientations, channels and with the parent scale
     (``spectra[s + 1]``), their auto-correlation and mean; the real parts' correlation with the
@@ -141,7 +144,7 @@ def _real_band_spectra(
             band, current, filtered, target.magnitude_means[s], real_rows[:ck].reshape(band.shape)
         )
         real = parent_regression_rows(real_rows, ck, target.real_parent[s]).reshape(band.shape)
-    return pyramid.fft(real)
+    return pyramid.rfft(real) if s == 0 else pyramid.fft(real)
 
 
 def _scratch(workspace: dict | None, key: tuple, shape: tuple, dtype) -> np.ndarray:

@@ -71,7 +71,6 @@ def filter_autocorrelation(x: np.ndarray, target: np.ndarray) -> np.ndarray:
     precision values, which widens it exactly as the conversion would.
     """
     h, w = x.shape[-2:]
-    batch = x.shape[:-2]
     lag = (target.shape[-1] - 1) // 2
     if lag == 0:
         x = np.asarray(x, dtype=np.float64)
@@ -95,7 +94,7 @@ def filter_autocorrelation(x: np.ndarray, target: np.ndarray) -> np.ndarray:
                 for ai, bi in zip(a.reshape((-1,) + a.shape[-2:]), b.reshape(-1, b.shape[-1]))
             ]
         ).reshape(b.shape)
-    gain = np.sqrt(np.abs(_symmetric_filter_spectrum(coef, plan, batch, h, w).real))
+    gain = _symmetric_filter_gain(coef, plan)
     spec *= gain
     return sfft.irfft2(spec, s=(h, w), workers=workers)
 
@@ -115,6 +114,9 @@ class _WindowPlan(NamedTuple):
     filter_neg: np.ndarray
     cols_pos: np.ndarray  # columns of +half and -half
     cols_neg: np.ndarray
+    multiplicity: np.ndarray  # 1 for the lag (0, 0), 2 for the others (+half and -half)
+    row_tables: np.ndarray  # (h, 2 (lag + 1)) float32 (:func:`_filter_tables`)
+    column_tables: np.ndarray  # (2, 2 lag + 1, w // 2 + 1)
 
 
 @functools.cache
@@ -138,7 +140,27 @@ def _window_plan(lag: int, h: int, w: int) -> _WindowPlan:
         filter_neg=np.searchsorted(filter_rows, rows_neg),
         cols_pos=half[:, 1] % w,
         cols_neg=-half[:, 1] % w,
+        multiplicity=np.where(np.any(half != 0, axis=1), 2.0, 1.0),
+        **_filter_tables(lag, h, w),
     )
+
+
+def _filter_tables(lag: int, h: int, w: int) -> dict:
+    """The cosine and sine tables of :func:`_symmetric_filter_gain`.
+
+    ``row_tables[u]``: ``cos(2 pi u i / h)`` for ``i = 0 .. lag``, then ``-sin(2 pi u i / h)``
+    (single precision); ``column_tables``: ``cos(2 pi v j / w)`` and ``sin(2 pi v j / w)``
+    for ``j = -lag .. lag``, ``v = 0 .. w // 2``. The filter's spectrum is then
+    ``row_tables @ [W @ cos; W @ sin]`` for its weights ``W[i, j + lag]``.
+    """
+    i = np.arange(lag + 1)
+    j = np.arange(-lag, lag + 1)
+    u = np.arange(h)
+    v = np.arange(w // 2 + 1)
+    a = 2.0 * np.pi * ((u[:, None] * i[None, :]) % h) / h  # (h, lag + 1)
+    b = 2.0 * np.pi * ((v[None, :] * j[:, None]) % w) / w  # (2 lag + 1, w // 2 + 1)
+    rows = np.concatenate([np.cos(a), -np.sin(a)], axis=1).astype(np.float32)
+    return {"row_tables": rows, "column_tables": np.stack([np.cos(b), np.sin(b)])}
 
 
 def _autocorrelation_values(power: np.ndarray, rows: np.ndarray, h: int, w: int) -> np.ndarray:
@@ -155,23 +177,23 @@ def _autocorrelation_values(power: np.ndarray, rows: np.ndarray, h: int, w: int)
     return values.astype(np.float64) / (h * w)
 
 
-def _symmetric_filter_spectrum(
-    coef: np.ndarray, plan: _WindowPlan, batch: tuple, h: int, w: int
-) -> np.ndarray:
-    """``rfft2`` of the single-precision ``(h, w)`` filters with ``coef`` at the lags ``+/- plan.half``.
+def _symmetric_filter_gain(coef: np.ndarray, plan: _WindowPlan) -> np.ndarray:
+    """``sqrt(|rfft2(filter)|)`` (single precision) of the symmetric filters with ``coef`` at
+    the lags ``+/- plan.half`` (the gain of :func:`filter_autocorrelation`).
 
-    The filters are zero outside the ``2 lag + 1`` rows of their window, so the first pass
-    of ``rfft2`` (real transforms along the rows) runs on those rows only; the second (along
-    the columns) is ``rfft2``'s own. The transform of a zero row is zero, so the result is
-    ``rfft2``'s but for the sign of zeros, which the gain's ``abs`` removes.
+    The filter's spectrum is real, ``G(u, v) = sum_(i, j) m_ij c_ij cos(2 pi (u i / h + v j / w))``
+    (``m = 2`` but at lag ``(0, 0)``), and separable: ``cos(a + b) = cos a cos b - sin a sin b``
+    makes it two small matrix products (:class:`_WindowPlan`'s cosine and sine tables)
+    instead of a 2-D transform.
     """
-    ch = np.zeros(batch + (plan.filter_rows.size, w), dtype=np.float32)  # the used rows only
-    ch[..., plan.filter_pos, plan.cols_pos] = coef
-    ch[..., plan.filter_neg, plan.cols_neg] = coef
-    workers = fft_workers(int(np.prod(batch)) * h * w)
-    spec = np.zeros(batch + (h, w // 2 + 1), dtype=np.complex64)
-    spec[..., plan.filter_rows, :] = sfft.rfft(ch, axis=-1, workers=workers)
-    return sfft.fft(spec, axis=-2, overwrite_x=True, workers=workers)
+    lag = plan.row_tables.shape[-1] // 2 - 1
+    weights = np.zeros(coef.shape[:-1] + (lag + 1, 2 * lag + 1))
+    weights[..., plan.half[:, 0], plan.half[:, 1] + lag] = coef * plan.multiplicity
+    columns = weights[..., None, :, :] @ plan.column_tables  # (..., 2, lag + 1, w // 2 + 1)
+    columns = columns.reshape(columns.shape[:-3] + (-1, columns.shape[-1])).astype(np.float32)
+    gain = np.matmul(plan.row_tables, columns)  # (..., h, w // 2 + 1)
+    np.abs(gain, out=gain)
+    return np.sqrt(gain, out=gain)
 
 
 @functools.cache

@@ -167,6 +167,12 @@ class ComplexSteerablePyramid:
             rows = crop_indices(self.sizes[level][0], self.sizes[level + 1][0])
             cols = crop_indices(self.sizes[level][1], self.sizes[level + 1][1])
             self.mid.append(self.lo[level][rows[:, None], cols[None, :]])
+        # the non-negative column frequencies of the finest level's filters, for the half
+        # spectra of rfft2 (reconstruct_level_half, reconstruct_spectrum_half)
+        half = self.shape[1] // 2 + 1
+        self.conj_real_filters_half = np.ascontiguousarray(self.conj_real_filters[0][..., :half])
+        self.mid_half = np.ascontiguousarray(self.mid[0][..., :half])
+        self.hi0_half = np.ascontiguousarray(self.hi0[..., :half])
 
     def fft(self, x: np.ndarray) -> np.ndarray:
         """2-D FFT over the last two axes, in the pyramid's precision (``single`` or double).
@@ -176,6 +182,17 @@ class ComplexSteerablePyramid:
         x = np.asarray(x)
         dtype = np.result_type(self.real_dtype, np.complex64) if np.iscomplexobj(x) else self.real_dtype
         return sfft.fft2(x.astype(dtype, copy=False), workers=fft_workers(x.size))
+
+    def rfft(self, x: np.ndarray) -> np.ndarray:
+        """``rfft2`` of real arrays in the pyramid's precision: the columns ``0 .. w // 2`` of
+        :meth:`fft` (pocketfft computes the full transform of real data as this half, then
+        mirrors it: the same bytes), in half the time."""
+        x = np.asarray(x)
+        return sfft.rfft2(x.astype(self.real_dtype, copy=False), workers=fft_workers(x.size))
+
+    def irfft(self, half: np.ndarray) -> np.ndarray:
+        """The real image of the finest level's size from its half spectrum (``irfft2``)."""
+        return sfft.irfft2(half, s=self.shape, workers=fft_workers(2 * half.size))
 
     def ifft(self, x: np.ndarray) -> np.ndarray:
         """Inverse 2-D FFT over the last two axes (complex result; threads as :meth:`fft`)."""
@@ -327,6 +344,47 @@ class ComplexSteerablePyramid:
         spec *= self.mid[level]
         return self.ifft(spec).real
 
+    def upsampled_half(self, half: np.ndarray, level: int) -> np.ndarray:
+        """The half spectrum (``rfft2``) at the size of ``level`` of a real image of level
+        ``level + 1`` given by its half spectrum: the same image as
+        ``ifft(resize_spectrum(fft(image), ...)).real`` up to rounding.
+
+        Zero-padding puts an even size's Nyquist frequency (``-n / 2``) on the fine grid's
+        negative side only; the real part of the inverse transform sees its Hermitian part,
+        half at ``-n / 2`` and half at ``+n / 2``, which is what this half spectrum holds.
+        """
+        (hc, wc), (h, w) = self.sizes[level + 1], self.sizes[level]
+        scale = (h * w) / (hc * wc)
+        out = np.zeros(half.shape[:-2] + (h, w // 2 + 1), dtype=np.result_type(half.dtype, np.complex64))
+        cols = (wc + 1) // 2  # the non-negative frequencies below the Nyquist one
+        runs = _crop_runs(h, hc)
+        for fine_r, coarse_r in runs:
+            np.multiply(half[..., coarse_r, :cols], scale, out=out[..., fine_r, :cols])
+        if wc % 2 == 0:  # the Nyquist column, half of it at +wc/2 (-wc/2 is its mirror)
+            for fine_r, coarse_r in runs:
+                np.multiply(half[..., coarse_r, cols], scale / 2, out=out[..., fine_r, cols])
+        if hc % 2 == 0:  # the Nyquist row: half at -hc/2, half at +hc/2
+            negative, positive = h - hc // 2, hc // 2
+            out[..., negative, :cols] *= 0.5
+            out[..., positive, :cols] = out[..., negative, :cols]
+            if wc % 2 == 0:  # the corner (-hc/2, -wc/2): half there, half at (hc/2, wc/2)
+                out[..., positive, cols] = out[..., negative, cols]
+                out[..., negative, cols] = 0.0
+        return out
+
+    def reconstruct_level_half(self, coarser: np.ndarray, real_half_spectra: np.ndarray) -> np.ndarray:
+        """:meth:`reconstruct_level` of the finest level from the real bands' half spectra
+        (``rfft2``, :meth:`rfft`): the same image up to rounding, with half the products and
+        a real inverse transform."""
+        spec = self.upsampled_half(self.rfft(coarser), 0)
+        filters = self.conj_real_filters_half  # np.sum over the orientations, in its order
+        total = real_half_spectra[..., 0, :, :] * filters[0]
+        for b in range(1, filters.shape[0]):
+            total += real_half_spectra[..., b, :, :] * filters[b]
+        spec += total
+        spec *= self.mid_half
+        return self.irfft(spec)
+
     def reconstruct(self, low0: np.ndarray, highpass: np.ndarray) -> np.ndarray:
         """The image from the finest partially reconstructed image and the high-pass residual."""
         return self.ifft(self.fft(low0) + self.fft(highpass) * self.hi0).real
@@ -342,6 +400,16 @@ class ComplexSteerablePyramid:
         spec = self.fft(low0)
         spec += highpass_spectrum * (gain * self.hi0)
         return self.ifft(spec).real
+
+    def reconstruct_spectrum_half(self, low0: np.ndarray, highpass_spectrum: np.ndarray, gain) -> np.ndarray:
+        """:meth:`reconstruct_spectrum` with half spectra (``rfft2``; the columns ``0 .. w // 2``
+        of the residual's transform) and a real inverse transform: the same image up to
+        rounding."""
+        half = self.shape[1] // 2 + 1
+        gain = np.asarray(gain, dtype=self.real_dtype)[..., None, None]
+        spec = self.rfft(low0)
+        spec += highpass_spectrum[..., :half] * (gain * self.hi0_half)
+        return self.irfft(spec)
 
     def analytic(self, real_bands: np.ndarray, level: int, *, real_spectra=None):
         """Re-create the complex bands ``(..., K, h, w)`` from their real parts; returns
