@@ -23,7 +23,7 @@ from typing import NamedTuple
 import numpy as np
 import scipy.fft as sfft
 
-from ..transforms.complex_steerable import fft_workers, for_each_band, inverse_norm
+from ..transforms.complex_steerable import fft_workers, for_each_band
 from .portilla import PSStatistics
 from .portilla_moments import FLAT_VARIANCE as FLAT_VARIANCE  # re-exported (round 1's home)
 from .portilla_moments import impose_kurtosis, impose_skewness
@@ -81,7 +81,7 @@ def filter_autocorrelation(x: np.ndarray, target: np.ndarray) -> np.ndarray:
     power = np.square(spec.real)
     power += np.square(spec.imag)
     plan = _window_plan(lag, h, w)
-    cx = _autocorrelation_values(power, plan.rows, h, w)
+    cx = _autocorrelation_values(power, plan, h, w)
     a = cx[..., plan.diff_rows, plan.diff_cols]
     a = a + np.where(plan.nonzero[None, :], cx[..., plan.sum_rows, plan.sum_cols], 0.0)
     b = target[..., plan.half[:, 0] + lag, plan.half[:, 1] + lag]
@@ -100,21 +100,18 @@ def filter_autocorrelation(x: np.ndarray, target: np.ndarray) -> np.ndarray:
 
 
 class _WindowPlan(NamedTuple):
-    """Index arrays of :func:`filter_autocorrelation` for one window and band size (cached)."""
+    """Index arrays and cosine tables of :func:`filter_autocorrelation` for one window and
+    band size (cached)."""
 
     half: np.ndarray  # the window's lags, one of each +/- pair (:func:`_half_offsets`)
     nonzero: np.ndarray  # which of them are not (0, 0)
-    rows: np.ndarray  # the auto-correlation rows the system needs, sorted
-    diff_rows: np.ndarray  # positions in ``rows`` and columns of the lag differences
-    diff_cols: np.ndarray
+    multiplicity: np.ndarray  # 1 for the lag (0, 0), 2 for the others (+half and -half)
+    diff_rows: np.ndarray  # positions in the table of auto-correlation values of the lag
+    diff_cols: np.ndarray  # differences (rows, columns) ...
     sum_rows: np.ndarray  # ... and of the lag sums
     sum_cols: np.ndarray
-    filter_rows: np.ndarray  # the rows of the symmetric filter, sorted
-    filter_pos: np.ndarray  # positions in ``filter_rows`` of the rows of +half and -half
-    filter_neg: np.ndarray
-    cols_pos: np.ndarray  # columns of +half and -half
-    cols_neg: np.ndarray
-    multiplicity: np.ndarray  # 1 for the lag (0, 0), 2 for the others (+half and -half)
+    lag_rows: np.ndarray  # (2, R, h) float64: cos and sin of 2 pi u r / h for the table's row lags r
+    lag_cols: np.ndarray  # (w // 2 + 1, 2 Q) float32: m_v cos, then m_v sin, of 2 pi v q / w
     row_tables: np.ndarray  # (h, 2 (lag + 1)) float32 (:func:`_filter_tables`)
     column_tables: np.ndarray  # (2, 2 lag + 1, w // 2 + 1)
 
@@ -125,22 +122,23 @@ def _window_plan(lag: int, h: int, w: int) -> _WindowPlan:
     diff = half[:, None, :] - half[None, :, :]
     summ = half[:, None, :] + half[None, :, :]
     rows = np.unique(np.concatenate([diff[..., 0].ravel(), summ[..., 0].ravel()]) % h)
-    rows_pos, rows_neg = half[:, 0] % h, -half[:, 0] % h
-    filter_rows = np.unique(np.concatenate([rows_pos, rows_neg]))
+    cols = np.unique(np.concatenate([diff[..., 1].ravel(), summ[..., 1].ravel()]) % w)
+    u, v = np.arange(h), np.arange(w // 2 + 1)
+    angle_rows = 2.0 * np.pi * ((rows[:, None] * u[None, :]) % h) / h  # (R, h)
+    angle_cols = 2.0 * np.pi * ((v[:, None] * cols[None, :]) % w) / w  # (V, Q)
+    # the half spectrum's columns stand for themselves and their mirrors (but 0 and w / 2)
+    mirrored = np.where((v == 0) | (2 * v == w), 1.0, 2.0)[:, None]
+    lag_cols = np.concatenate([mirrored * np.cos(angle_cols), mirrored * np.sin(angle_cols)], axis=1)
     return _WindowPlan(
         half=half,
         nonzero=np.any(half != 0, axis=1),
-        rows=rows,
-        diff_rows=np.searchsorted(rows, diff[..., 0] % h),
-        diff_cols=diff[..., 1] % w,
-        sum_rows=np.searchsorted(rows, summ[..., 0] % h),
-        sum_cols=summ[..., 1] % w,
-        filter_rows=filter_rows,
-        filter_pos=np.searchsorted(filter_rows, rows_pos),
-        filter_neg=np.searchsorted(filter_rows, rows_neg),
-        cols_pos=half[:, 1] % w,
-        cols_neg=-half[:, 1] % w,
         multiplicity=np.where(np.any(half != 0, axis=1), 2.0, 1.0),
+        diff_rows=np.searchsorted(rows, diff[..., 0] % h),
+        diff_cols=np.searchsorted(cols, diff[..., 1] % w),
+        sum_rows=np.searchsorted(rows, summ[..., 0] % h),
+        sum_cols=np.searchsorted(cols, summ[..., 1] % w),
+        lag_rows=np.stack([np.cos(angle_rows), np.sin(angle_rows)]),
+        lag_cols=lag_cols.astype(np.float32),
         **_filter_tables(lag, h, w),
     )
 
@@ -163,18 +161,21 @@ def _filter_tables(lag: int, h: int, w: int) -> dict:
     return {"row_tables": rows, "column_tables": np.stack([np.cos(b), np.sin(b)])}
 
 
-def _autocorrelation_values(power: np.ndarray, rows: np.ndarray, h: int, w: int) -> np.ndarray:
-    """Rows ``rows`` (sorted, distinct) of ``irfft2(power, s=(h, w)).astype(float64) / (h w)``.
+def _autocorrelation_values(power: np.ndarray, plan: _WindowPlan, h: int, w: int) -> np.ndarray:
+    """The periodic auto-correlation ``irfft2(power, s=(h, w)) / (h w)`` (double precision) at
+    the lags the system needs: a table ``(..., R, Q)`` that ``plan.diff_rows`` ... index.
 
-    ``irfft2`` transforms along the columns, then along the rows (scaled by ``1 / (h w)``, a
-    product after the transform); the auto-correlation window needs a few rows, so the
-    second pass runs on those only. Same bytes as the full transform.
+    ``power`` is the single-precision half spectrum ``|rfft2(x)|^2``; the auto-correlation at
+    ``(r, q)`` is ``sum_(u, v) P(u, v) cos(2 pi (u r / h + v q / w)) / (h w)^2``, separable
+    (``cos(a + b) = cos a cos b - sin a sin b``): one single-precision product over the
+    columns (the half spectrum's columns counted twice for their mirrors), one in double
+    precision over the rows, instead of transforms of the whole spectrum.
     """
-    workers = fft_workers(2 * power.size)
-    columns = sfft.ifft(power + 0.0j, axis=-2, norm="forward", overwrite_x=True, workers=workers)
-    values = sfft.irfft(columns[..., rows, :], n=w, axis=-1, norm="forward", workers=workers)
-    values *= inverse_norm(h * w, values.dtype)
-    return values.astype(np.float64) / (h * w)
+    q = plan.lag_cols.shape[1] // 2
+    columns = (power @ plan.lag_cols).astype(np.float64)  # (..., h, 2 Q)
+    values = plan.lag_rows[0] @ columns[..., :q]
+    values -= plan.lag_rows[1] @ columns[..., q:]
+    return values / (float(h * w) ** 2)
 
 
 def _symmetric_filter_gain(coef: np.ndarray, plan: _WindowPlan) -> np.ndarray:
