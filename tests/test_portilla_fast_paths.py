@@ -4,10 +4,10 @@ Issue 20 rewrote the synthesis loop for speed (rows of the regressions filled in
 band-by-band chains, FFT passes on the non-zero lines only, polynomial arithmetic on
 coefficient arrays, threads). This file keeps the loop as it was before, written with plain
 NumPy and ``numpy.polynomial``, and checks that the optimised loop gives the same bytes, with
-and without threads (``docs/methods/portilla_simoncelli.md``, "Performance"). Issue 21 moved
+and without threads (``docs/methods/portilla_simoncelli.md``, "Performance"). Its single-precision step moved
 the parents and the magnitude step to single precision: the plain loop does the same by
 default, and its ``single=False`` form (double precision, as before) stays within a stated
-tolerance of the optimised loop. Issue 20's next round computed four steps differently (the
+tolerance of the optimised loop. Its half-spectrum step computed four steps differently (the
 skewness and kurtosis steps from power sums, the auto-correlation values and filter gains by
 cosine products, the finest scale's and the image's reconstruction from half spectra): the
 plain loop keeps their previous forms (``previous=True``, within a stated tolerance of the
@@ -67,7 +67,9 @@ def _forward(pyramid, x):
 def _reconstruct_level(pyramid, coarser, level, real_spectra, single, previous=True):
     if level == 0 and not previous:  # half spectra (rfft2) at the finest scale
         return pyramid.reconstruct_level_half(coarser, real_spectra)
-    coarse = _fft(pyramid, coarser)  # issue 21: zero-padded in its single precision (before: double)
+    coarse = _fft(
+        pyramid, coarser
+    )  # single-precision step: zero-padded in its single precision (before: double)
     dtype = coarse.dtype if single else complex
     spec = _resize(coarse, pyramid.sizes[level + 1], pyramid.sizes[level], dtype)
     spec = spec + np.sum(real_spectra * np.conj(pyramid.real_filters[level]), axis=-3)
@@ -220,7 +222,7 @@ def _magnitudes(band, target, level, parent_magnitudes, lags, single, previous=T
     window = projections.fit_window(target.magnitude_autocorr[level], mags.shape[-2:], lags)
     mags = _steps(previous)[2](mags, window)
     means = target.magnitude_means[level][..., None, None]
-    if single:  # issue 21: the new magnitudes in single precision
+    if single:  # single-precision step: the new magnitudes in single precision
         mags, means = mags.astype(np.float32), means.astype(np.float32)
     magnitude = np.maximum(mags + means, 0.0)
     return band * (magnitude / np.where(current > 0, current, 1.0))
@@ -243,12 +245,12 @@ def _parent_regression(reals, parents, target_xp):
 
 
 def _parents(pyramid, spectra, level, single):
-    # issue 21: the parents in the spectra's single precision (before: double precision)
+    # single-precision step: the parents in the spectra's single precision (before: double precision)
     dtype = spectra[level + 1].dtype if single else complex
     up = sfft.ifft2(_resize(spectra[level + 1], pyramid.sizes[level + 1], pyramid.sizes[level], dtype))
     re, im = up.real, up.imag
     doubled = np.empty(up.shape, dtype=complex)
-    if single:  # issue 21: -conj(p)^2 / |p|
+    if single:  # single-precision step: -conj(p)^2 / |p|
         size = np.abs(up)
         safe = np.where(size > 0, size, 1.0)
         square = np.square(up)
@@ -284,7 +286,7 @@ def _pixels(x, target, previous=True):
 def _reference_iteration(x, target, pyramid, lags, single=True, previous=False):
     """One iteration of the plain loop; ``single=False``: the parents, the magnitude step and the
     partial reconstructions in double precision and the high-pass residual transformed back
-    and forth, as before issue 21 (and ``previous`` with it); ``previous=True``: the moment
+    and forth, as before issue 20's single-precision step (and ``previous`` with it); ``previous=True``: the moment
     and auto-correlation steps and the full-spectrum reconstructions as before their power
     sums, cosine products and half spectra."""
     previous = previous or not single
@@ -316,7 +318,7 @@ def _reference_iteration(x, target, pyramid, lags, single=True, previous=False):
         image = _reconstruct_level(pyramid, image, s, real_spectra, single, previous)
         image = _lowpass(image, target.low_autocorr[s], target.low_skew_kurt[:, s], pixel_var, lags, previous)
     wanted = target.highpass_variance
-    if single:  # issue 21: the residual kept as its spectrum, its variance by Parseval
+    if single:  # single-precision step: the residual kept as its spectrum, its variance by Parseval
         power = np.square(hp_spec.real) + np.square(hp_spec.imag)
         hp_var = (
             np.sum(power, axis=(-2, -1), dtype=np.float64) / float(hp_spec.shape[-1] * hp_spec.shape[-2]) ** 2
@@ -376,7 +378,7 @@ def test_the_iteration_gives_the_plain_loops_bytes(colour, shape, cpus, monkeypa
 @pytest.mark.parametrize("colour", ["grey", "rgb"])
 @pytest.mark.parametrize("shape", [(128, 128), (72, 90)])
 def test_single_precision_steps_stay_close_to_double_precision(colour, shape):
-    # issue 21 computes the parents, the magnitude step and the partial reconstructions in
+    # issue 20's single-precision step computes the parents, the magnitude step and the partial reconstructions in
     # single precision (the loop above); before, in double precision (``single=False``). One iteration from the
     # same image: at most 4e-3 apart (one 8-bit level), 1e-3 on average (a quarter of one);
     # measured 7e-4-2.2e-3 and 1-4e-4 (docs/methods/portilla_simoncelli.md, "Performance")

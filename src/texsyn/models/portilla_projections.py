@@ -439,8 +439,8 @@ def real_part_of_product(band: np.ndarray, ratio: np.ndarray, out: np.ndarray) -
     entries are taken from the complex product itself.
     """
     np.multiply(band.real, ratio, out=out)
-    zero = out == 0
-    if zero.any():
+    if not out.all():  # some zeros
+        zero = out == 0
         out[zero] = (band[zero] * ratio[zero]).real
     return out
 
@@ -467,7 +467,7 @@ def highpass_shrink_factor(spectrum: np.ndarray, target_variance: np.ndarray) ->
     """The factor per channel of :func:`shrink_highpass`, from the residual's Fourier transform.
 
     The residual's variance is ``sum |F|^2 / (H W)^2`` (Parseval; the residual has zero
-    mean): the synthesis loop keeps the residual as a spectrum (issue 21).
+    mean): the synthesis loop keeps the residual as a spectrum (issue 20, single-precision step).
     """
     h, w = spectrum.shape[-2:]
     power = np.square(spectrum.real)

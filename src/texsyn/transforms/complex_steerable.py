@@ -207,7 +207,8 @@ class ComplexSteerablePyramid:
     @staticmethod
     def resize_spectrum(spec: np.ndarray, size_from, size_to) -> np.ndarray:
         """Crop or zero-pad a full 2-D spectrum (last two axes), keeping amplitudes, in its
-        precision (complex64 stays single precision since issue 21, before it was widened)."""
+        precision (complex64 stays single precision since issue 20's single-precision step; before,
+        it was widened)."""
         scale = (size_to[0] * size_to[1]) / (size_from[0] * size_from[1])
         shape = spec.shape[:-2] + tuple(size_to)
         if size_to[0] <= size_from[0]:
