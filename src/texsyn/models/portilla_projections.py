@@ -288,9 +288,12 @@ def impose_lowpass_statistics(
     centre = (window.shape[-1] - 1) // 2
     target_var = window[:, centre, centre]
     active = target_var / np.maximum(pixel_var, 1e-300) > 1e-4
-    out = np.array(images, dtype=np.float64)
-    if active.any():
-        out[active] = filter_autocorrelation(out[active], window[active])
+    if active.all():  # the usual case: no copies in and out of the active channels
+        out = np.asarray(filter_autocorrelation(images, window), dtype=np.float64)
+    else:
+        out = np.array(images, dtype=np.float64)
+        if active.any():
+            out[active] = filter_autocorrelation(out[active], window[active])
 
     def run(channels: slice) -> None:
         for c in range(channels.start, channels.stop):
