@@ -515,7 +515,9 @@ def impose_pixel_statistics(x: np.ndarray, target: PSStatistics) -> np.ndarray:
     var0 = target.pixel_moments[:, 1]
     flat = x.reshape(c, -1)
     centred = (flat - flat.mean(axis=1, keepdims=True)).T
-    flat = adjust_correlation(centred, target.colour_covariance).T + mean0[:, None]
+    # the product comes out column-major: one copy to rows makes every channel's steps below,
+    # and the final reshape, work on contiguous data (1 ms of a 256x256 colour image; same bytes)
+    flat = np.ascontiguousarray(adjust_correlation(centred, target.colour_covariance).T + mean0[:, None])
 
     def run(channels: slice) -> None:
         for ci in range(channels.start, channels.stop):
