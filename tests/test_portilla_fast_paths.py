@@ -65,11 +65,10 @@ def _forward(pyramid, x):
 
 
 def _reconstruct_level(pyramid, coarser, level, real_spectra, single, previous=True):
-    if level == 0 and not previous:  # half spectra (rfft2) at the finest scale
-        return pyramid.reconstruct_level_half(coarser, real_spectra)
-    coarse = _fft(
-        pyramid, coarser
-    )  # single-precision step: zero-padded in its single precision (before: double)
+    if not previous:  # the half spectrum (rfft2) of the partially reconstructed image
+        return pyramid.reconstruct_level_half(coarser, real_spectra, level)
+    # single-precision step: zero-padded in its single precision (before: double)
+    coarse = _fft(pyramid, coarser)
     dtype = coarse.dtype if single else complex
     spec = _resize(coarse, pyramid.sizes[level + 1], pyramid.sizes[level], dtype)
     spec = spec + np.sum(real_spectra * np.conj(pyramid.real_filters[level]), axis=-3)
@@ -173,15 +172,22 @@ def _steps(previous):
     return moments.impose_skewness, moments.impose_kurtosis, projections.impose_autocorrelation
 
 
-def _lowpass(images, autocorr, skew_kurt, pixel_var, lags, previous=True):
+def _lowpass(images, autocorr, skew_kurt, pixel_var, lags, previous=True, shape=None):
+    """``previous=False``: ``images`` are the half spectra (rfft2) of images of size ``shape``."""
     skewness, kurtosis, autocorrelation = _steps(previous)
-    window = projections.fit_window(autocorr, images.shape[-2:], lags)
+    shape = images.shape[-2:] if previous else shape
+    window = projections.fit_window(autocorr, shape, lags)
     centre = (window.shape[-1] - 1) // 2
     target_var = window[:, centre, centre]
     active = target_var / np.maximum(pixel_var, 1e-300) > 1e-4
-    out = np.array(images, dtype=np.float64)
-    if active.any():
-        out[active] = autocorrelation(out[active], window[active])
+    if not previous and centre > 0 and active.all():  # the filter from the spectrum
+        out = projections.filter_autocorrelation_spectrum(images, window, shape).astype(np.float64)
+    else:
+        if not previous:
+            images = sfft.irfft2(images, s=shape)
+        out = np.array(images, dtype=np.float64)
+        if active.any():
+            out[active] = autocorrelation(out[active], window[active])
     for c in range(out.shape[0]):
         if active[c]:
             out[c] = kurtosis(skewness(out[c], skew_kurt[c, 0]), skew_kurt[c, 1])
@@ -294,9 +300,18 @@ def _reference_iteration(x, target, pyramid, lags, single=True, previous=False):
     pixel_var = target.pixel_moments[:, 1]
     highpass, bands, residual, spectra, hp_spec = _forward(pyramid, x)
     residual = residual - residual.mean(axis=(-2, -1), keepdims=True)
-    image = sfft.ifft2(_fft(pyramid, residual) * pyramid.mid[-1]).real
+    if previous:
+        image = sfft.ifft2(_fft(pyramid, residual) * pyramid.mid[-1]).real
+    else:  # its half spectrum
+        image = sfft.rfft2(residual.astype(np.float32)) * pyramid.mid[-1][..., : residual.shape[-1] // 2 + 1]
     image = _lowpass(
-        image, target.low_autocorr[n_scales], target.low_skew_kurt[:, n_scales], pixel_var, lags, previous
+        image,
+        target.low_autocorr[n_scales],
+        target.low_skew_kurt[:, n_scales],
+        pixel_var,
+        lags,
+        previous,
+        pyramid.sizes[n_scales],
     )
     for s in range(n_scales - 1, -1, -1):
         parent_mags = parent_reals = None
@@ -316,7 +331,15 @@ def _reference_iteration(x, target, pyramid, lags, single=True, previous=False):
             real_spectra = _fft(pyramid, real)
             spectra[s] = real_spectra * pyramid.half_planes[s]
         image = _reconstruct_level(pyramid, image, s, real_spectra, single, previous)
-        image = _lowpass(image, target.low_autocorr[s], target.low_skew_kurt[:, s], pixel_var, lags, previous)
+        image = _lowpass(
+            image,
+            target.low_autocorr[s],
+            target.low_skew_kurt[:, s],
+            pixel_var,
+            lags,
+            previous,
+            pyramid.sizes[s],
+        )
     wanted = target.highpass_variance
     if single:  # single-precision step: the residual kept as its spectrum, its variance by Parseval
         power = np.square(hp_spec.real) + np.square(hp_spec.imag)
@@ -511,8 +534,16 @@ def test_the_half_spectra_give_the_full_spectra_images(shape):
         assert np.abs(full - half).max() < tol
         bands = rng.standard_normal((3, 4, h, w))
         full = pyramid.reconstruct_level(coarse, bands, 0)
-        half = pyramid.reconstruct_level_half(coarse, pyramid.rfft(bands))
+        half = pyramid.irfft(pyramid.reconstruct_level_half(coarse, pyramid.rfft(bands)))
         assert np.abs(full - half).max() < tol
+        coarser = rng.standard_normal((3,) + pyramid.sizes[2])
+        bands = rng.standard_normal((3, 4, hc, wc))
+        full = pyramid.reconstruct_level(coarser, bands, 1)
+        half = pyramid.irfft(pyramid.reconstruct_level_half(coarser, pyramid.fft(bands), 1), 1)
+        assert np.abs(full - half).max() < tol
+        residual = rng.standard_normal((3,) + pyramid.sizes[2])
+        full = pyramid.lowpass_image(residual)
+        assert np.abs(full - pyramid.irfft(pyramid.lowpass_half(residual), 2)).max() < tol
         low, gain = rng.standard_normal((3, h, w)), np.array([0.5, 1.0, 0.8])
         residual = pyramid.fft(rng.standard_normal((3, h, w))) * pyramid.hi0
         full = pyramid.reconstruct_spectrum(low, residual, gain)

@@ -35,6 +35,7 @@ __all__ = [
     "adjust_cross_correlation_rows",
     "centred_magnitudes",
     "filter_autocorrelation",
+    "filter_autocorrelation_spectrum",
     "fit_window",
     "impose_autocorrelation",
     "impose_kurtosis",
@@ -76,8 +77,17 @@ def filter_autocorrelation(x: np.ndarray, target: np.ndarray) -> np.ndarray:
         x = np.asarray(x, dtype=np.float64)
         cur = np.mean(x**2, axis=(-2, -1), keepdims=True)
         return x * np.sqrt(target[..., :1, :1] / np.where(cur > 0, cur, 1.0))
-    workers = fft_workers(x.size)
-    spec = sfft.rfft2(np.asarray(x, dtype=np.float32), workers=workers)
+    spec = sfft.rfft2(np.asarray(x, dtype=np.float32), workers=fft_workers(x.size))
+    return filter_autocorrelation_spectrum(spec, target, (h, w))
+
+
+def filter_autocorrelation_spectrum(spec: np.ndarray, target: np.ndarray, shape: tuple) -> np.ndarray:
+    """:func:`filter_autocorrelation` of the images of size ``shape`` given by their half
+    spectra ``spec`` (``rfft2``, single precision; overwritten), for a window wider than a
+    pixel: the synthesis loop's partial reconstructions are spectra already
+    (``docs/methods/portilla_simoncelli.md``, "Performance")."""
+    h, w = shape
+    lag = (target.shape[-1] - 1) // 2
     power = np.square(spec.real)
     power += np.square(spec.imag)
     plan = _window_plan(lag, h, w)
@@ -94,9 +104,8 @@ def filter_autocorrelation(x: np.ndarray, target: np.ndarray) -> np.ndarray:
                 for ai, bi in zip(a.reshape((-1,) + a.shape[-2:]), b.reshape(-1, b.shape[-1]))
             ]
         ).reshape(b.shape)
-    gain = _symmetric_filter_gain(coef, plan)
-    spec *= gain
-    return sfft.irfft2(spec, s=(h, w), workers=workers)
+    spec *= _symmetric_filter_gain(coef, plan)
+    return sfft.irfft2(spec, s=(h, w), workers=fft_workers(2 * spec.size))
 
 
 class _WindowPlan(NamedTuple):
@@ -276,24 +285,46 @@ def fit_window(target: np.ndarray, shape: tuple[int, int], lags: int) -> np.ndar
 
 
 def impose_lowpass_statistics(
-    images: np.ndarray, autocorr: np.ndarray, skew_kurt: np.ndarray, pixel_var: np.ndarray, lags: int
+    images: np.ndarray | None,
+    autocorr: np.ndarray,
+    skew_kurt: np.ndarray,
+    pixel_var: np.ndarray,
+    lags: int,
+    *,
+    spectrum: np.ndarray | None = None,
+    shape: tuple | None = None,
 ) -> np.ndarray:
     """Impose auto-correlation, skewness and kurtosis on every channel of a low-pass image.
 
     The partially reconstructed low-pass images of paper section 4 (``(C, h, w)``). A channel
     whose target variance is below ``1e-4`` of its pixel variance ``pixel_var`` only gets its
-    variance (its auto-correlation system would be ill-conditioned).
+    variance (its auto-correlation system would be ill-conditioned). The synthesis loop gives
+    the images by their half spectra instead (``images=None``, ``spectrum`` from ``rfft2``,
+    single precision, overwritten; ``shape`` their size): the filter then starts from them
+    (:func:`filter_autocorrelation_spectrum`).
     """
-    window = fit_window(autocorr, images.shape[-2:], lags)
+    if spectrum is not None:
+        assert shape is not None
+        h, w = shape
+    else:
+        assert images is not None
+        h, w = images.shape[-2:]
+    window = fit_window(autocorr, (h, w), lags)
     centre = (window.shape[-1] - 1) // 2
     target_var = window[:, centre, centre]
     active = target_var / np.maximum(pixel_var, 1e-300) > 1e-4
-    if active.all():  # the usual case: no copies in and out of the active channels
-        out = np.asarray(filter_autocorrelation(images, window), dtype=np.float64)
+    if spectrum is not None and centre > 0 and active.all():  # the loop's usual case
+        out = filter_autocorrelation_spectrum(spectrum, window, (h, w)).astype(np.float64)
     else:
-        out = np.array(images, dtype=np.float64)
-        if active.any():
-            out[active] = filter_autocorrelation(out[active], window[active])
+        if spectrum is not None:
+            images = sfft.irfft2(spectrum, s=(h, w), workers=fft_workers(2 * spectrum.size))
+        assert images is not None
+        if active.all():  # no copies in and out of the active channels
+            out = np.asarray(filter_autocorrelation(images, window), dtype=np.float64)
+        else:
+            out = np.array(images, dtype=np.float64)
+            if active.any():
+                out[active] = filter_autocorrelation(out[active], window[active])
 
     def run(channels: slice) -> None:
         for c in range(channels.start, channels.stop):

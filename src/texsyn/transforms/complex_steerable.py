@@ -167,12 +167,13 @@ class ComplexSteerablePyramid:
             rows = crop_indices(self.sizes[level][0], self.sizes[level + 1][0])
             cols = crop_indices(self.sizes[level][1], self.sizes[level + 1][1])
             self.mid.append(self.lo[level][rows[:, None], cols[None, :]])
-        # the non-negative column frequencies of the finest level's filters, for the half
-        # spectra of rfft2 (reconstruct_level_half, reconstruct_spectrum_half)
-        half = self.shape[1] // 2 + 1
-        self.conj_real_filters_half = np.ascontiguousarray(self.conj_real_filters[0][..., :half])
-        self.mid_half = np.ascontiguousarray(self.mid[0][..., :half])
-        self.hi0_half = np.ascontiguousarray(self.hi0[..., :half])
+        # the non-negative column frequencies of the filters, for the half spectra of rfft2
+        # (lowpass_half, reconstruct_level_half, reconstruct_spectrum_half)
+        self.conj_real_filters_half = [
+            np.ascontiguousarray(f[..., : f.shape[-1] // 2 + 1]) for f in self.conj_real_filters
+        ]
+        self.mid_half = [np.ascontiguousarray(m[..., : m.shape[-1] // 2 + 1]) for m in self.mid]
+        self.hi0_half = np.ascontiguousarray(self.hi0[..., : self.shape[1] // 2 + 1])
 
     def fft(self, x: np.ndarray) -> np.ndarray:
         """2-D FFT over the last two axes, in the pyramid's precision (``single`` or double).
@@ -190,9 +191,9 @@ class ComplexSteerablePyramid:
         x = np.asarray(x)
         return sfft.rfft2(x.astype(self.real_dtype, copy=False), workers=fft_workers(x.size))
 
-    def irfft(self, half: np.ndarray) -> np.ndarray:
-        """The real image of the finest level's size from its half spectrum (``irfft2``)."""
-        return sfft.irfft2(half, s=self.shape, workers=fft_workers(2 * half.size))
+    def irfft(self, half: np.ndarray, level: int = 0) -> np.ndarray:
+        """The real image of the size of ``level`` from its half spectrum (``irfft2``)."""
+        return sfft.irfft2(half, s=self.sizes[level], workers=fft_workers(2 * half.size))
 
     def ifft(self, x: np.ndarray) -> np.ndarray:
         """Inverse 2-D FFT over the last two axes (complex result; threads as :meth:`fft`)."""
@@ -373,18 +374,29 @@ class ComplexSteerablePyramid:
                 out[..., negative, cols] = 0.0
         return out
 
-    def reconstruct_level_half(self, coarser: np.ndarray, real_half_spectra: np.ndarray) -> np.ndarray:
-        """:meth:`reconstruct_level` of the finest level from the real bands' half spectra
-        (``rfft2``, :meth:`rfft`): the same image up to rounding, with half the products and
-        a real inverse transform."""
-        spec = self.upsampled_half(self.rfft(coarser), 0)
-        filters = self.conj_real_filters_half  # np.sum over the orientations, in its order
-        total = real_half_spectra[..., 0, :, :] * filters[0]
+    def lowpass_half(self, residual: np.ndarray) -> np.ndarray:
+        """:meth:`lowpass_image`'s half spectrum (``rfft2``; the image is :meth:`irfft` of it
+        at level ``n_scales``)."""
+        spec = self.rfft(residual)
+        spec *= self.mid_half[-1]
+        return spec
+
+    def reconstruct_level_half(
+        self, coarser: np.ndarray, real_half_spectra: np.ndarray, level: int = 0
+    ) -> np.ndarray:
+        """:meth:`reconstruct_level` from the real bands' half spectra (``rfft2``: :meth:`rfft`,
+        or the columns ``0 .. w // 2`` of :meth:`fft`), with half the products: the half
+        spectrum of the partially reconstructed image (the same image up to rounding:
+        :meth:`irfft` of it)."""
+        spec = self.upsampled_half(self.rfft(coarser), level)
+        filters = self.conj_real_filters_half[level]  # np.sum over the orientations, in its order
+        half = filters.shape[-1]
+        total = real_half_spectra[..., 0, :, :half] * filters[0]
         for b in range(1, filters.shape[0]):
-            total += real_half_spectra[..., b, :, :] * filters[b]
+            total += real_half_spectra[..., b, :, :half] * filters[b]
         spec += total
-        spec *= self.mid_half
-        return self.irfft(spec)
+        spec *= self.mid_half[level]
+        return spec
 
     def reconstruct(self, low0: np.ndarray, highpass: np.ndarray) -> np.ndarray:
         """The image from the finest partially reconstructed image and the high-pass residual."""
