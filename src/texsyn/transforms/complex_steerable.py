@@ -14,6 +14,12 @@ partially reconstructed low-pass images (:meth:`~ComplexSteerablePyramid.lowpass
 their real parts (:meth:`~ComplexSteerablePyramid.analytic`) and the interpolation of a level
 to the next finer size (:meth:`~ComplexSteerablePyramid.expand`). Levels are 0-based, the
 finest first (``docs/methods/portilla_simoncelli.md``).
+
+Why this module is long: besides the plain analysis and reconstruction, the synthesis loop
+needs forms of them that skip the zero lines of their inputs (:meth:`upsampled_ifft`) or
+work on half spectra (:meth:`~ComplexSteerablePyramid.reconstruct_level_half` and the
+others of ``rfft2``, with the Nyquist frequencies of zero-padding); they are kept next to
+the full forms they must match (``tests/test_portilla_fast_paths.py``).
 """
 
 from __future__ import annotations
