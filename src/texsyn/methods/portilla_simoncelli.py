@@ -83,24 +83,34 @@ def project_statistics(
     pixel_var = target.pixel_moments[:, 1]
     highpass, bands, lows = pyramid.forward(x, all_lows=False, highpass_spectrum=True)
     lows[-1] = lows[-1] - lows[-1].mean(axis=(-2, -1), keepdims=True)
+    # the partially reconstructed images come as half spectra (rfft2), which the low-pass
+    # step's auto-correlation filter starts from
     image = impose_lowpass_statistics(
-        pyramid.lowpass_image(lows[-1]),
+        None,
         target.low_autocorr[n_scales],
         target.low_skew_kurt[:, n_scales],
         pixel_var,
         lags,
+        spectrum=pyramid.lowpass_half(lows[-1]),
+        shape=pyramid.sizes[n_scales],
     )
     spectra: list = [None] * n_scales  # the bands' spectra, filled coarse to fine as parents
     for s in range(n_scales - 1, -1, -1):
         real_spectra = _real_band_spectra(bands[s], spectra, target, pyramid, s, lags, workspace)
         if s > 0:  # the parents of the next finer scale (the complex bands are not needed)
             spectra[s] = real_spectra * pyramid.half_planes[s]
-        image = pyramid.reconstruct_level(image, None, s, real_spectra=real_spectra)
+        # (at the finest scale, which has no finer one, the bands' half spectra only: rfft2)
         image = impose_lowpass_statistics(
-            image, target.low_autocorr[s], target.low_skew_kurt[:, s], pixel_var, lags
+            None,
+            target.low_autocorr[s],
+            target.low_skew_kurt[:, s],
+            pixel_var,
+            lags,
+            spectrum=pyramid.reconstruct_level_half(image, real_spectra, s),
+            shape=pyramid.sizes[s],
         )
     shrink = highpass_shrink_factor(highpass, target.highpass_variance)
-    x = pyramid.reconstruct_spectrum(image, highpass, shrink)
+    x = pyramid.reconstruct_spectrum_half(image, highpass, shrink)
     return impose_pixel_statistics(x, target)
 
 
@@ -114,7 +124,8 @@ def _real_band_spectra(
     workspace: dict | None,
 ) -> np.ndarray:
     """Impose the statistics of scale ``s`` on its complex bands (paper section 4); the Fourier
-    transforms of their new real parts.
+    transforms of their new real parts (at the finest scale, ``s = 0``, their half spectra:
+    ``rfft2``).
 
     The magnitudes' covariance across orientations, channels and with the parent scale
     (``spectra[s + 1]``), their auto-correlation and mean; the real parts' correlation with the
@@ -141,7 +152,7 @@ def _real_band_spectra(
             band, current, filtered, target.magnitude_means[s], real_rows[:ck].reshape(band.shape)
         )
         real = parent_regression_rows(real_rows, ck, target.real_parent[s]).reshape(band.shape)
-    return pyramid.fft(real)
+    return pyramid.rfft(real) if s == 0 else pyramid.fft(real)
 
 
 def _scratch(workspace: dict | None, key: tuple, shape: tuple, dtype) -> np.ndarray:

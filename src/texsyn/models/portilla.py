@@ -13,7 +13,7 @@ maps the paper's list of statistics to the fields of :class:`PSStatistics`.
 Why this module is long: the parents' regressors (:func:`parent_rows`) serve both the
 statistics (double precision) and the synthesis loop (single precision, written in place
 into the regressions' rows, with its own phase doubling :func:`phase_doubled_square`; issue
-21), and are kept next to the statistics they must match.
+20's single-precision step), and are kept next to the statistics they must match.
 """
 
 from __future__ import annotations
@@ -237,7 +237,7 @@ def phase_doubled_square(
     """:func:`phase_doubled_parts` as ``-conj(p)^2 / |p|``, given ``size = |p|``.
 
     The same numbers up to rounding with fewer passes over the data: the single-precision
-    synthesis loop uses it (issue 21, ``docs/methods/portilla_simoncelli.md``,
+    synthesis loop uses it (issue 20's single-precision step, ``docs/methods/portilla_simoncelli.md``,
     "Performance"); the exemplar's statistics keep :func:`phase_doubled_parts`.
     """
     square = np.square(parent)

@@ -23,7 +23,7 @@ from typing import NamedTuple
 import numpy as np
 import scipy.fft as sfft
 
-from ..transforms.complex_steerable import fft_workers, for_each_band, inverse_norm
+from ..transforms.complex_steerable import fft_workers, for_each_band
 from .portilla import PSStatistics
 from .portilla_moments import FLAT_VARIANCE as FLAT_VARIANCE  # re-exported (round 1's home)
 from .portilla_moments import impose_kurtosis, impose_skewness
@@ -35,6 +35,7 @@ __all__ = [
     "adjust_cross_correlation_rows",
     "centred_magnitudes",
     "filter_autocorrelation",
+    "filter_autocorrelation_spectrum",
     "fit_window",
     "impose_autocorrelation",
     "impose_kurtosis",
@@ -71,18 +72,26 @@ def filter_autocorrelation(x: np.ndarray, target: np.ndarray) -> np.ndarray:
     precision values, which widens it exactly as the conversion would.
     """
     h, w = x.shape[-2:]
-    batch = x.shape[:-2]
     lag = (target.shape[-1] - 1) // 2
     if lag == 0:
         x = np.asarray(x, dtype=np.float64)
         cur = np.mean(x**2, axis=(-2, -1), keepdims=True)
         return x * np.sqrt(target[..., :1, :1] / np.where(cur > 0, cur, 1.0))
-    workers = fft_workers(x.size)
-    spec = sfft.rfft2(np.asarray(x, dtype=np.float32), workers=workers)
+    spec = sfft.rfft2(np.asarray(x, dtype=np.float32), workers=fft_workers(x.size))
+    return filter_autocorrelation_spectrum(spec, target, (h, w))
+
+
+def filter_autocorrelation_spectrum(spec: np.ndarray, target: np.ndarray, shape: tuple) -> np.ndarray:
+    """:func:`filter_autocorrelation` of the images of size ``shape`` given by their half
+    spectra ``spec`` (``rfft2``, single precision; overwritten), for a window wider than a
+    pixel: the synthesis loop's partial reconstructions are spectra already
+    (``docs/methods/portilla_simoncelli.md``, "Performance")."""
+    h, w = shape
+    lag = (target.shape[-1] - 1) // 2
     power = np.square(spec.real)
     power += np.square(spec.imag)
     plan = _window_plan(lag, h, w)
-    cx = _autocorrelation_values(power, plan.rows, h, w)
+    cx = _autocorrelation_values(power, plan, h, w)
     a = cx[..., plan.diff_rows, plan.diff_cols]
     a = a + np.where(plan.nonzero[None, :], cx[..., plan.sum_rows, plan.sum_cols], 0.0)
     b = target[..., plan.half[:, 0] + lag, plan.half[:, 1] + lag]
@@ -95,26 +104,25 @@ def filter_autocorrelation(x: np.ndarray, target: np.ndarray) -> np.ndarray:
                 for ai, bi in zip(a.reshape((-1,) + a.shape[-2:]), b.reshape(-1, b.shape[-1]))
             ]
         ).reshape(b.shape)
-    gain = np.sqrt(np.abs(_symmetric_filter_spectrum(coef, plan, batch, h, w).real))
-    spec *= gain
-    return sfft.irfft2(spec, s=(h, w), workers=workers)
+    spec *= _symmetric_filter_gain(coef, plan)
+    return sfft.irfft2(spec, s=(h, w), workers=fft_workers(2 * spec.size))
 
 
 class _WindowPlan(NamedTuple):
-    """Index arrays of :func:`filter_autocorrelation` for one window and band size (cached)."""
+    """Index arrays and cosine tables of :func:`filter_autocorrelation` for one window and
+    band size (cached)."""
 
     half: np.ndarray  # the window's lags, one of each +/- pair (:func:`_half_offsets`)
     nonzero: np.ndarray  # which of them are not (0, 0)
-    rows: np.ndarray  # the auto-correlation rows the system needs, sorted
-    diff_rows: np.ndarray  # positions in ``rows`` and columns of the lag differences
-    diff_cols: np.ndarray
+    multiplicity: np.ndarray  # 1 for the lag (0, 0), 2 for the others (+half and -half)
+    diff_rows: np.ndarray  # positions in the table of auto-correlation values of the lag
+    diff_cols: np.ndarray  # differences (rows, columns) ...
     sum_rows: np.ndarray  # ... and of the lag sums
     sum_cols: np.ndarray
-    filter_rows: np.ndarray  # the rows of the symmetric filter, sorted
-    filter_pos: np.ndarray  # positions in ``filter_rows`` of the rows of +half and -half
-    filter_neg: np.ndarray
-    cols_pos: np.ndarray  # columns of +half and -half
-    cols_neg: np.ndarray
+    lag_rows: np.ndarray  # (2, R, h) float64: cos and sin of 2 pi u r / h for the table's row lags r
+    lag_cols: np.ndarray  # (w // 2 + 1, 2 Q) float32: m_v cos, then m_v sin, of 2 pi v q / w
+    row_tables: np.ndarray  # (h, 2 (lag + 1)) float32 (:func:`_filter_tables`)
+    column_tables: np.ndarray  # (2, 2 lag + 1, w // 2 + 1)
 
 
 @functools.cache
@@ -123,55 +131,79 @@ def _window_plan(lag: int, h: int, w: int) -> _WindowPlan:
     diff = half[:, None, :] - half[None, :, :]
     summ = half[:, None, :] + half[None, :, :]
     rows = np.unique(np.concatenate([diff[..., 0].ravel(), summ[..., 0].ravel()]) % h)
-    rows_pos, rows_neg = half[:, 0] % h, -half[:, 0] % h
-    filter_rows = np.unique(np.concatenate([rows_pos, rows_neg]))
+    cols = np.unique(np.concatenate([diff[..., 1].ravel(), summ[..., 1].ravel()]) % w)
+    u, v = np.arange(h), np.arange(w // 2 + 1)
+    angle_rows = 2.0 * np.pi * ((rows[:, None] * u[None, :]) % h) / h  # (R, h)
+    angle_cols = 2.0 * np.pi * ((v[:, None] * cols[None, :]) % w) / w  # (V, Q)
+    # the half spectrum's columns stand for themselves and their mirrors (but 0 and w / 2)
+    mirrored = np.where((v == 0) | (2 * v == w), 1.0, 2.0)[:, None]
+    lag_cols = np.concatenate([mirrored * np.cos(angle_cols), mirrored * np.sin(angle_cols)], axis=1)
     return _WindowPlan(
         half=half,
         nonzero=np.any(half != 0, axis=1),
-        rows=rows,
+        multiplicity=np.where(np.any(half != 0, axis=1), 2.0, 1.0),
         diff_rows=np.searchsorted(rows, diff[..., 0] % h),
-        diff_cols=diff[..., 1] % w,
+        diff_cols=np.searchsorted(cols, diff[..., 1] % w),
         sum_rows=np.searchsorted(rows, summ[..., 0] % h),
-        sum_cols=summ[..., 1] % w,
-        filter_rows=filter_rows,
-        filter_pos=np.searchsorted(filter_rows, rows_pos),
-        filter_neg=np.searchsorted(filter_rows, rows_neg),
-        cols_pos=half[:, 1] % w,
-        cols_neg=-half[:, 1] % w,
+        sum_cols=np.searchsorted(cols, summ[..., 1] % w),
+        lag_rows=np.stack([np.cos(angle_rows), np.sin(angle_rows)]),
+        lag_cols=lag_cols.astype(np.float32),
+        **_filter_tables(lag, h, w),
     )
 
 
-def _autocorrelation_values(power: np.ndarray, rows: np.ndarray, h: int, w: int) -> np.ndarray:
-    """Rows ``rows`` (sorted, distinct) of ``irfft2(power, s=(h, w)).astype(float64) / (h w)``.
+def _filter_tables(lag: int, h: int, w: int) -> dict:
+    """The cosine and sine tables of :func:`_symmetric_filter_gain`.
 
-    ``irfft2`` transforms along the columns, then along the rows (scaled by ``1 / (h w)``, a
-    product after the transform); the auto-correlation window needs a few rows, so the
-    second pass runs on those only. Same bytes as the full transform.
+    ``row_tables[u]``: ``cos(2 pi u i / h)`` for ``i = 0 .. lag``, then ``-sin(2 pi u i / h)``
+    (single precision); ``column_tables``: ``cos(2 pi v j / w)`` and ``sin(2 pi v j / w)``
+    for ``j = -lag .. lag``, ``v = 0 .. w // 2``. The filter's spectrum is then
+    ``row_tables @ [W @ cos; W @ sin]`` for its weights ``W[i, j + lag]``.
     """
-    workers = fft_workers(2 * power.size)
-    columns = sfft.ifft(power + 0.0j, axis=-2, norm="forward", overwrite_x=True, workers=workers)
-    values = sfft.irfft(columns[..., rows, :], n=w, axis=-1, norm="forward", workers=workers)
-    values *= inverse_norm(h * w, values.dtype)
-    return values.astype(np.float64) / (h * w)
+    i = np.arange(lag + 1)
+    j = np.arange(-lag, lag + 1)
+    u = np.arange(h)
+    v = np.arange(w // 2 + 1)
+    a = 2.0 * np.pi * ((u[:, None] * i[None, :]) % h) / h  # (h, lag + 1)
+    b = 2.0 * np.pi * ((v[None, :] * j[:, None]) % w) / w  # (2 lag + 1, w // 2 + 1)
+    rows = np.concatenate([np.cos(a), -np.sin(a)], axis=1).astype(np.float32)
+    return {"row_tables": rows, "column_tables": np.stack([np.cos(b), np.sin(b)])}
 
 
-def _symmetric_filter_spectrum(
-    coef: np.ndarray, plan: _WindowPlan, batch: tuple, h: int, w: int
-) -> np.ndarray:
-    """``rfft2`` of the single-precision ``(h, w)`` filters with ``coef`` at the lags ``+/- plan.half``.
+def _autocorrelation_values(power: np.ndarray, plan: _WindowPlan, h: int, w: int) -> np.ndarray:
+    """The periodic auto-correlation ``irfft2(power, s=(h, w)) / (h w)`` (double precision) at
+    the lags the system needs: a table ``(..., R, Q)`` that ``plan.diff_rows`` ... index.
 
-    The filters are zero outside the ``2 lag + 1`` rows of their window, so the first pass
-    of ``rfft2`` (real transforms along the rows) runs on those rows only; the second (along
-    the columns) is ``rfft2``'s own. The transform of a zero row is zero, so the result is
-    ``rfft2``'s but for the sign of zeros, which the gain's ``abs`` removes.
+    ``power`` is the single-precision half spectrum ``|rfft2(x)|^2``; the auto-correlation at
+    ``(r, q)`` is ``sum_(u, v) P(u, v) cos(2 pi (u r / h + v q / w)) / (h w)^2``, separable
+    (``cos(a + b) = cos a cos b - sin a sin b``): one single-precision product over the
+    columns (the half spectrum's columns counted twice for their mirrors), one in double
+    precision over the rows, instead of transforms of the whole spectrum.
     """
-    ch = np.zeros(batch + (plan.filter_rows.size, w), dtype=np.float32)  # the used rows only
-    ch[..., plan.filter_pos, plan.cols_pos] = coef
-    ch[..., plan.filter_neg, plan.cols_neg] = coef
-    workers = fft_workers(int(np.prod(batch)) * h * w)
-    spec = np.zeros(batch + (h, w // 2 + 1), dtype=np.complex64)
-    spec[..., plan.filter_rows, :] = sfft.rfft(ch, axis=-1, workers=workers)
-    return sfft.fft(spec, axis=-2, overwrite_x=True, workers=workers)
+    q = plan.lag_cols.shape[1] // 2
+    columns = (power @ plan.lag_cols).astype(np.float64)  # (..., h, 2 Q)
+    values = plan.lag_rows[0] @ columns[..., :q]
+    values -= plan.lag_rows[1] @ columns[..., q:]
+    return values / (float(h * w) ** 2)
+
+
+def _symmetric_filter_gain(coef: np.ndarray, plan: _WindowPlan) -> np.ndarray:
+    """``sqrt(|rfft2(filter)|)`` (single precision) of the symmetric filters with ``coef`` at
+    the lags ``+/- plan.half`` (the gain of :func:`filter_autocorrelation`).
+
+    The filter's spectrum is real, ``G(u, v) = sum_(i, j) m_ij c_ij cos(2 pi (u i / h + v j / w))``
+    (``m = 2`` but at lag ``(0, 0)``), and separable: ``cos(a + b) = cos a cos b - sin a sin b``
+    makes it two small matrix products (:class:`_WindowPlan`'s cosine and sine tables)
+    instead of a 2-D transform.
+    """
+    lag = plan.row_tables.shape[-1] // 2 - 1
+    weights = np.zeros(coef.shape[:-1] + (lag + 1, 2 * lag + 1))
+    weights[..., plan.half[:, 0], plan.half[:, 1] + lag] = coef * plan.multiplicity
+    columns = weights[..., None, :, :] @ plan.column_tables  # (..., 2, lag + 1, w // 2 + 1)
+    columns = columns.reshape(columns.shape[:-3] + (-1, columns.shape[-1])).astype(np.float32)
+    gain = np.matmul(plan.row_tables, columns)  # (..., h, w // 2 + 1)
+    np.abs(gain, out=gain)
+    return np.sqrt(gain, out=gain)
 
 
 @functools.cache
@@ -253,21 +285,46 @@ def fit_window(target: np.ndarray, shape: tuple[int, int], lags: int) -> np.ndar
 
 
 def impose_lowpass_statistics(
-    images: np.ndarray, autocorr: np.ndarray, skew_kurt: np.ndarray, pixel_var: np.ndarray, lags: int
+    images: np.ndarray | None,
+    autocorr: np.ndarray,
+    skew_kurt: np.ndarray,
+    pixel_var: np.ndarray,
+    lags: int,
+    *,
+    spectrum: np.ndarray | None = None,
+    shape: tuple | None = None,
 ) -> np.ndarray:
     """Impose auto-correlation, skewness and kurtosis on every channel of a low-pass image.
 
     The partially reconstructed low-pass images of paper section 4 (``(C, h, w)``). A channel
     whose target variance is below ``1e-4`` of its pixel variance ``pixel_var`` only gets its
-    variance (its auto-correlation system would be ill-conditioned).
+    variance (its auto-correlation system would be ill-conditioned). The synthesis loop gives
+    the images by their half spectra instead (``images=None``, ``spectrum`` from ``rfft2``,
+    single precision, overwritten; ``shape`` their size): the filter then starts from them
+    (:func:`filter_autocorrelation_spectrum`).
     """
-    window = fit_window(autocorr, images.shape[-2:], lags)
+    if spectrum is not None:
+        assert shape is not None
+        h, w = shape
+    else:
+        assert images is not None
+        h, w = images.shape[-2:]
+    window = fit_window(autocorr, (h, w), lags)
     centre = (window.shape[-1] - 1) // 2
     target_var = window[:, centre, centre]
     active = target_var / np.maximum(pixel_var, 1e-300) > 1e-4
-    out = np.array(images, dtype=np.float64)
-    if active.any():
-        out[active] = filter_autocorrelation(out[active], window[active])
+    if spectrum is not None and centre > 0 and active.all():  # the loop's usual case
+        out = filter_autocorrelation_spectrum(spectrum, window, (h, w)).astype(np.float64)
+    else:
+        if spectrum is not None:
+            images = sfft.irfft2(spectrum, s=(h, w), workers=fft_workers(2 * spectrum.size))
+        assert images is not None
+        if active.all():  # no copies in and out of the active channels
+            out = np.asarray(filter_autocorrelation(images, window), dtype=np.float64)
+        else:
+            out = np.array(images, dtype=np.float64)
+            if active.any():
+                out[active] = filter_autocorrelation(out[active], window[active])
 
     def run(channels: slice) -> None:
         for c in range(channels.start, channels.stop):
@@ -411,14 +468,14 @@ def magnitude_real_parts(
 def real_part_of_product(band: np.ndarray, ratio: np.ndarray, out: np.ndarray) -> np.ndarray:
     """``(band * ratio).real`` (complex times real) written into ``out``, without the complex product.
 
-    The complex product's real part is ``re ratio - im 0``: the same number as
-    ``re ratio`` except when that is a zero, whose sign the ``- im 0`` may flip; those
-    entries are taken from the complex product itself.
+    The complex product's real part is ``re ratio - im 0`` (the real factor's imaginary part
+    is ``+0``): the same number as ``re ratio`` except when that is a zero, whose sign the
+    ``- im 0`` may flip. The loop's bands have such zeros (a few per cent of the new
+    magnitudes are clipped to 0), so the subtraction is done everywhere (two passes, fewer
+    than finding and recomputing the zeros).
     """
     np.multiply(band.real, ratio, out=out)
-    zero = out == 0
-    if zero.any():
-        out[zero] = (band[zero] * ratio[zero]).real
+    out -= np.multiply(band.imag, 0.0)  # signed zeros
     return out
 
 
@@ -444,7 +501,7 @@ def highpass_shrink_factor(spectrum: np.ndarray, target_variance: np.ndarray) ->
     """The factor per channel of :func:`shrink_highpass`, from the residual's Fourier transform.
 
     The residual's variance is ``sum |F|^2 / (H W)^2`` (Parseval; the residual has zero
-    mean): the synthesis loop keeps the residual as a spectrum (issue 21).
+    mean): the synthesis loop keeps the residual as a spectrum (issue 20, single-precision step).
     """
     h, w = spectrum.shape[-2:]
     power = np.square(spectrum.real)
@@ -489,7 +546,9 @@ def impose_pixel_statistics(x: np.ndarray, target: PSStatistics) -> np.ndarray:
     var0 = target.pixel_moments[:, 1]
     flat = x.reshape(c, -1)
     centred = (flat - flat.mean(axis=1, keepdims=True)).T
-    flat = adjust_correlation(centred, target.colour_covariance).T + mean0[:, None]
+    # the product comes out column-major: one copy to rows makes every channel's steps below,
+    # and the final reshape, work on contiguous data (1 ms of a 256x256 colour image; same bytes)
+    flat = np.ascontiguousarray(adjust_correlation(centred, target.colour_covariance).T + mean0[:, None])
 
     def run(channels: slice) -> None:
         for ci in range(channels.start, channels.stop):

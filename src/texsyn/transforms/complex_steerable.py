@@ -14,6 +14,12 @@ partially reconstructed low-pass images (:meth:`~ComplexSteerablePyramid.lowpass
 their real parts (:meth:`~ComplexSteerablePyramid.analytic`) and the interpolation of a level
 to the next finer size (:meth:`~ComplexSteerablePyramid.expand`). Levels are 0-based, the
 finest first (``docs/methods/portilla_simoncelli.md``).
+
+Why this module is long: besides the plain analysis and reconstruction, the synthesis loop
+needs forms of them that skip the zero lines of their inputs (:meth:`upsampled_ifft`) or
+work on half spectra (:meth:`~ComplexSteerablePyramid.reconstruct_level_half` and the
+others of ``rfft2``, with the Nyquist frequencies of zero-padding); they are kept next to
+the full forms they must match (``tests/test_portilla_fast_paths.py``).
 """
 
 from __future__ import annotations
@@ -167,6 +173,13 @@ class ComplexSteerablePyramid:
             rows = crop_indices(self.sizes[level][0], self.sizes[level + 1][0])
             cols = crop_indices(self.sizes[level][1], self.sizes[level + 1][1])
             self.mid.append(self.lo[level][rows[:, None], cols[None, :]])
+        # the non-negative column frequencies of the filters, for the half spectra of rfft2
+        # (lowpass_half, reconstruct_level_half, reconstruct_spectrum_half)
+        self.conj_real_filters_half = [
+            np.ascontiguousarray(f[..., : f.shape[-1] // 2 + 1]) for f in self.conj_real_filters
+        ]
+        self.mid_half = [np.ascontiguousarray(m[..., : m.shape[-1] // 2 + 1]) for m in self.mid]
+        self.hi0_half = np.ascontiguousarray(self.hi0[..., : self.shape[1] // 2 + 1])
 
     def fft(self, x: np.ndarray) -> np.ndarray:
         """2-D FFT over the last two axes, in the pyramid's precision (``single`` or double).
@@ -176,6 +189,17 @@ class ComplexSteerablePyramid:
         x = np.asarray(x)
         dtype = np.result_type(self.real_dtype, np.complex64) if np.iscomplexobj(x) else self.real_dtype
         return sfft.fft2(x.astype(dtype, copy=False), workers=fft_workers(x.size))
+
+    def rfft(self, x: np.ndarray) -> np.ndarray:
+        """``rfft2`` of real arrays in the pyramid's precision: the columns ``0 .. w // 2`` of
+        :meth:`fft` (pocketfft computes the full transform of real data as this half, then
+        mirrors it: the same bytes), in half the time."""
+        x = np.asarray(x)
+        return sfft.rfft2(x.astype(self.real_dtype, copy=False), workers=fft_workers(x.size))
+
+    def irfft(self, half: np.ndarray, level: int = 0) -> np.ndarray:
+        """The real image of the size of ``level`` from its half spectrum (``irfft2``)."""
+        return sfft.irfft2(half, s=self.sizes[level], workers=fft_workers(2 * half.size))
 
     def ifft(self, x: np.ndarray) -> np.ndarray:
         """Inverse 2-D FFT over the last two axes (complex result; threads as :meth:`fft`)."""
@@ -190,7 +214,8 @@ class ComplexSteerablePyramid:
     @staticmethod
     def resize_spectrum(spec: np.ndarray, size_from, size_to) -> np.ndarray:
         """Crop or zero-pad a full 2-D spectrum (last two axes), keeping amplitudes, in its
-        precision (complex64 stays single precision since issue 21, before it was widened)."""
+        precision (complex64 stays single precision since issue 20's single-precision step; before,
+        it was widened)."""
         scale = (size_to[0] * size_to[1]) / (size_from[0] * size_from[1])
         shape = spec.shape[:-2] + tuple(size_to)
         if size_to[0] <= size_from[0]:
@@ -327,6 +352,58 @@ class ComplexSteerablePyramid:
         spec *= self.mid[level]
         return self.ifft(spec).real
 
+    def upsampled_half(self, half: np.ndarray, level: int) -> np.ndarray:
+        """The half spectrum (``rfft2``) at the size of ``level`` of a real image of level
+        ``level + 1`` given by its half spectrum: the same image as
+        ``ifft(resize_spectrum(fft(image), ...)).real`` up to rounding.
+
+        Zero-padding puts an even size's Nyquist frequency (``-n / 2``) on the fine grid's
+        negative side only; the real part of the inverse transform sees its Hermitian part,
+        half at ``-n / 2`` and half at ``+n / 2``, which is what this half spectrum holds.
+        """
+        (hc, wc), (h, w) = self.sizes[level + 1], self.sizes[level]
+        scale = (h * w) / (hc * wc)
+        out = np.zeros(half.shape[:-2] + (h, w // 2 + 1), dtype=np.result_type(half.dtype, np.complex64))
+        cols = (wc + 1) // 2  # the non-negative frequencies below the Nyquist one
+        runs = _crop_runs(h, hc)
+        for fine_r, coarse_r in runs:
+            np.multiply(half[..., coarse_r, :cols], scale, out=out[..., fine_r, :cols])
+        if wc % 2 == 0:  # the Nyquist column, half of it at +wc/2 (-wc/2 is its mirror)
+            for fine_r, coarse_r in runs:
+                np.multiply(half[..., coarse_r, cols], scale / 2, out=out[..., fine_r, cols])
+        if hc % 2 == 0:  # the Nyquist row: half at -hc/2, half at +hc/2
+            negative, positive = h - hc // 2, hc // 2
+            out[..., negative, :cols] *= 0.5
+            out[..., positive, :cols] = out[..., negative, :cols]
+            if wc % 2 == 0:  # the corner (-hc/2, -wc/2): half there, half at (hc/2, wc/2)
+                out[..., positive, cols] = out[..., negative, cols]
+                out[..., negative, cols] = 0.0
+        return out
+
+    def lowpass_half(self, residual: np.ndarray) -> np.ndarray:
+        """:meth:`lowpass_image`'s half spectrum (``rfft2``; the image is :meth:`irfft` of it
+        at level ``n_scales``)."""
+        spec = self.rfft(residual)
+        spec *= self.mid_half[-1]
+        return spec
+
+    def reconstruct_level_half(
+        self, coarser: np.ndarray, real_half_spectra: np.ndarray, level: int = 0
+    ) -> np.ndarray:
+        """:meth:`reconstruct_level` from the real bands' half spectra (``rfft2``: :meth:`rfft`,
+        or the columns ``0 .. w // 2`` of :meth:`fft`), with half the products: the half
+        spectrum of the partially reconstructed image (the same image up to rounding:
+        :meth:`irfft` of it)."""
+        spec = self.upsampled_half(self.rfft(coarser), level)
+        filters = self.conj_real_filters_half[level]  # np.sum over the orientations, in its order
+        half = filters.shape[-1]
+        total = real_half_spectra[..., 0, :, :half] * filters[0]
+        for b in range(1, filters.shape[0]):
+            total += real_half_spectra[..., b, :, :half] * filters[b]
+        spec += total
+        spec *= self.mid_half[level]
+        return spec
+
     def reconstruct(self, low0: np.ndarray, highpass: np.ndarray) -> np.ndarray:
         """The image from the finest partially reconstructed image and the high-pass residual."""
         return self.ifft(self.fft(low0) + self.fft(highpass) * self.hi0).real
@@ -342,6 +419,16 @@ class ComplexSteerablePyramid:
         spec = self.fft(low0)
         spec += highpass_spectrum * (gain * self.hi0)
         return self.ifft(spec).real
+
+    def reconstruct_spectrum_half(self, low0: np.ndarray, highpass_spectrum: np.ndarray, gain) -> np.ndarray:
+        """:meth:`reconstruct_spectrum` with half spectra (``rfft2``; the columns ``0 .. w // 2``
+        of the residual's transform) and a real inverse transform: the same image up to
+        rounding."""
+        half = self.shape[1] // 2 + 1
+        gain = np.asarray(gain, dtype=self.real_dtype)[..., None, None]
+        spec = self.rfft(low0)
+        spec += highpass_spectrum[..., :half] * (gain * self.hi0_half)
+        return self.irfft(spec)
 
     def analytic(self, real_bands: np.ndarray, level: int, *, real_spectra=None):
         """Re-create the complex bands ``(..., K, h, w)`` from their real parts; returns
