@@ -107,6 +107,9 @@ class TextureSynthesizer:
     #: factor on the sum of :meth:`memory_terms` for the arrays too small to be modelled one
     #: by one and the allocator's slack; 1 MiB is added for small objects (``docs/memory.md``)
     memory_margin: ClassVar[float] = 1.25
+    #: the same factor for a streamed run (:meth:`streaming_memory_terms`): its terms are small
+    #: and the allocator's slack around them is not calibrated (``docs/memory.md``)
+    streaming_memory_margin: ClassVar[float] = 1.25
     #: parameters that change what ``fit`` learns, for methods whose saved models hold the
     #: learned arrays (:meth:`fitted_arrays`): :func:`texsyn.load` refuses new values for them
     learned_params: ClassVar[tuple[str, ...]] = ()
@@ -240,11 +243,12 @@ class TextureSynthesizer:
         """
         self._check_params()
         out = None if output_shape is None else (int(output_shape[0]), int(output_shape[1]))
-        if streaming and out is not None:
+        streamed = streaming and out is not None and bool(self.streams_rows)
+        if streamed:
             terms = self.streaming_memory_terms(tuple(exemplar_shape), out)
         else:
             terms = self.memory_terms(tuple(exemplar_shape), out)
-        return int(np.ceil(self._memory_total(terms)))
+        return int(np.ceil(self._memory_total(terms, streaming=streamed)))
 
     def check_memory_for(
         self,
@@ -270,12 +274,15 @@ class TextureSynthesizer:
         self._check_memory(tuple(exemplar_shape))
         if output_shape is not None:
             out = (int(output_shape[0]), int(output_shape[1]))
-            terms = self.streaming_memory_terms(tuple(exemplar_shape), out) if streaming else None
-            self._check_memory(tuple(exemplar_shape), out, terms=terms)
+            streamed = streaming and bool(self.streams_rows)
+            terms = self.streaming_memory_terms(tuple(exemplar_shape), out) if streamed else None
+            self._check_memory(tuple(exemplar_shape), out, terms=terms, streaming=streamed)
 
-    def _memory_total(self, terms: dict[str, float]) -> float:
-        """:attr:`memory_margin` times the terms, plus 1 MiB of small arrays and objects."""
-        return self.memory_margin * float(sum(terms.values())) + 2.0**20
+    def _memory_total(self, terms: dict[str, float], *, streaming: bool = False) -> float:
+        """:attr:`memory_margin` (:attr:`streaming_memory_margin` for a streamed run) times
+        the terms, plus 1 MiB of small arrays and objects."""
+        margin = self.streaming_memory_margin if streaming else self.memory_margin
+        return margin * float(sum(terms.values())) + 2.0**20
 
     def _check_memory(
         self,
@@ -285,11 +292,12 @@ class TextureSynthesizer:
         task: str | None = None,
         advice: str | None = None,
         terms: dict[str, float] | None = None,
+        streaming: bool = False,
     ) -> None:
         """Raise :class:`~texsyn.errors.MemoryLimitError` when the estimate exceeds the limit."""
         if terms is None:
             terms = self.memory_terms(tuple(exemplar_shape), output_shape)
-        need = self._memory_total(terms)
+        need = self._memory_total(terms, streaming=streaming)
         main, size = max(terms.items(), key=lambda kv: kv[1])
         h, w = exemplar_shape[:2]
         if task is None:
