@@ -244,7 +244,7 @@ class TextureSynthesizer:
         self._check_params()
         out = None if output_shape is None else (int(output_shape[0]), int(output_shape[1]))
         streamed = streaming and out is not None and bool(self.streams_rows)
-        if streamed:
+        if streamed and out is not None:
             terms = self.streaming_memory_terms(tuple(exemplar_shape), out)
         else:
             terms = self.memory_terms(tuple(exemplar_shape), out)
