@@ -83,6 +83,22 @@ def _block_minima(lower, start, minima):  # pragma: no cover - compiled
 
 
 @jit()
+def _keep_smallest(values, index, v, i):  # pragma: no cover - compiled
+    """Insert ``v`` (of index ``i``) into ``values``, the ascending smallest values seen so far
+    with their ``index``, when it is smaller than the last; an equal value stays behind the
+    ones already there (the earlier index first)."""
+    last = values.size - 1
+    if v < values[last]:
+        p = last
+        while p > 0 and values[p - 1] > v:
+            values[p] = values[p - 1]
+            index[p] = index[p - 1]
+            p -= 1
+        values[p] = v
+        index[p] = i
+
+
+@jit()
 def _choose_row(
     win,
     kn,
@@ -185,15 +201,7 @@ def _choose_row(
     block_val = np.full(n_first, np.inf)
     block_idx = np.zeros(n_first, np.int64)
     for b in range(minima.size):
-        v = minima[b]
-        if v < block_val[n_first - 1]:
-            p = n_first - 1
-            while p > 0 and block_val[p - 1] > v:
-                block_val[p] = block_val[p - 1]
-                block_idx[p] = block_idx[p - 1]
-                p -= 1
-            block_val[p] = v
-            block_idx[p] = b
+        _keep_smallest(block_val, block_idx, minima[b], b)
     upper = np.inf
     first = 0
     for t in range(n_first):
@@ -237,15 +245,7 @@ def _choose_row(
     first_val = np.full(n_first, np.inf)
     first_idx = np.zeros(n_first, np.int64)
     for k in range(count):
-        v = bound[k]
-        if v < first_val[n_first - 1]:
-            p = n_first - 1
-            while p > 0 and first_val[p - 1] > v:
-                first_val[p] = first_val[p - 1]
-                first_idx[p] = first_idx[p - 1]
-                p -= 1
-            first_val[p] = v
-            first_idx[p] = passed[k]
+        _keep_smallest(first_val, first_idx, bound[k], passed[k])
     best_raw = upper
     n_exact = min(n_first, count)
     for t in range(n_exact):  # their exact distances (kept: they are survivors too, mostly)
