@@ -99,6 +99,23 @@ def _keep_smallest(values, index, v, i):  # pragma: no cover - compiled
 
 
 @jit()
+def _row_scratch(w, channels, n):  # pragma: no cover - compiled
+    """The scratch arrays of :func:`_choose_row` for windows of side ``w`` and a bank of
+    ``n`` windows: ``(oy, ox, weights, values, passed, bound, dist, index)``, allocated once
+    per call of its callers and reused for every row."""
+    return (
+        np.empty(w * w, np.int64),
+        np.empty(w * w, np.int64),
+        np.empty(w * w),
+        np.empty((w * w, channels)),
+        np.empty(n, np.int64),
+        np.empty(n),
+        np.empty(n),
+        np.empty(n, np.int64),
+    )
+
+
+@jit()
 def _choose_row(
     win,
     kn,
@@ -325,14 +342,7 @@ def _choose_rows(
     choice = np.zeros(m, np.int64)
     error = np.zeros(m)
     unsure = np.zeros(m, np.bool_)
-    oy = np.empty(w * w, np.int64)
-    ox = np.empty(w * w, np.int64)
-    weights = np.empty(w * w)
-    values = np.empty((w * w, channels))
-    passed = np.empty(n, np.int64)
-    index = np.empty(n, np.int64)
-    bound = np.empty(n)
-    dist = np.empty(n)
+    oy, ox, weights, values, passed, bound, dist, index = _row_scratch(w, channels, n)
     for i in range(m):
         row = position[i]
         choice[i], error[i], unsure[i] = _choose_row(
@@ -400,14 +410,7 @@ def _fill_batches(
     error = np.zeros(most)
     win = np.empty((w, w, channels))
     kn = np.empty((w, w), np.bool_)
-    oy = np.empty(w * w, np.int64)
-    ox = np.empty(w * w, np.int64)
-    weights = np.empty(w * w)
-    values = np.empty((w * w, channels))
-    passed = np.empty(n, np.int64)
-    index = np.empty(n, np.int64)
-    bound = np.empty(n)
-    dist = np.empty(n)
+    oy, ox, weights, values, passed, bound, dist, index = _row_scratch(w, channels, n)
     written = 0
     for b in range(batch, stop):
         start, end = bounds[b], bounds[b + 1]
