@@ -37,10 +37,12 @@ LAYERS: dict[str, int] = {
     "texsyn.methods": 7,
     "texsyn.persistence": 8,
     "texsyn.metrics": 8,
+    "texsyn.editing": 8,
     "texsyn.report": 9,
-    "texsyn.cli": 10,
     "texsyn.web": 10,
-    "texsyn": 11,
+    "texsyn.batch": 10,
+    "texsyn.cli": 11,
+    "texsyn": 12,
 }
 
 MAX_LINES = 400
