@@ -1,6 +1,6 @@
 """texsyn: exemplar-based texture synthesis behind one API.
 
-The package front (``docs/architecture.md``, layer 11): :func:`synthesize`, :func:`modify`,
+The package front (``docs/architecture.md``, layer 12): :func:`synthesize`, :func:`modify`,
 :func:`animate`, the method registry (:data:`METHODS`, :func:`make_method`) and the saved
 models (:func:`save`, :func:`load`; ``docs/persistence.md``).
 
