@@ -97,3 +97,20 @@ def test_the_default_output_shape_is_the_librarys(tmp_path, capsys):
     assert run(capsys, "synth", "builtin:grass", "-o", out, "-m", "random_phase", "--seed", "1", "-q")[0] == 0
     exemplar = texsyn.data.exemplar("grass")
     assert read_image(out).shape[:2] == default_output_shape(exemplar.shape)
+
+
+def test_progress_json_writes_one_record_per_line_and_the_same_bytes(tmp_path, capfd):
+    """``texsyn --progress json``: what ``texsyn serve`` reads (docs/cli.md)."""
+    import json
+
+    from texsyn.cli import main
+
+    args = ["synth", "-m", "quilting", "--size", "64x64", "--seed", "3", "-p", "patch_size=16"]
+    assert main(["--progress", "json", *args, "-o", str(tmp_path / "a.png")]) == 0
+    lines = [line for line in capfd.readouterr().err.splitlines() if line.startswith("{")]
+    records = [json.loads(line)["progress"] for line in lines]
+    assert records and records[-1]["done"] == records[-1]["total"] and records[-1]["stage"] == "blocks"
+    assert {"label", "stage", "done", "total", "elapsed"} <= set(records[0])
+    assert [r["done"] for r in records] == sorted(r["done"] for r in records)
+    assert main([*args, "-q", "-o", str(tmp_path / "b.png")]) == 0
+    assert (tmp_path / "a.png").read_bytes() == (tmp_path / "b.png").read_bytes()

@@ -30,6 +30,9 @@ HEAVY = (
     "texsyn.report",
     "texsyn.metrics",
     "importlib.metadata",
+    "texsyn.web",
+    "fastapi",
+    "uvicorn",
 )
 
 

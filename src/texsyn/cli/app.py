@@ -74,6 +74,7 @@ COMMANDS = {
     "modify": "modify",
     "animate": "animate",
     "compare": "compare",
+    "serve": "serve",
     "methods": "list_methods",
 }
 
@@ -85,6 +86,7 @@ _command_function, _ = lazy_exports(
         "modify": "modification",
         "animate": "animation",
         "compare": "comparison",
+        "serve": "serving",
         "list_methods": "listing",
     },
 )
@@ -114,6 +116,10 @@ def _set_debug(ctx: click.Context, param, value: bool) -> None:
         ctx.ensure_object(State).debug = True
 
 
+def _set_progress(ctx: click.Context, param, value: str) -> None:
+    ctx.ensure_object(State).progress = value
+
+
 @click.group(cls=LazyCommands, context_settings={"help_option_names": ["-h", "--help"]})
 @click.option(
     "--debug",
@@ -122,6 +128,17 @@ def _set_debug(ctx: click.Context, param, value: bool) -> None:
     expose_value=False,
     callback=_set_debug,
     help="Print the full traceback of an error (also TEXSYN_DEBUG=1).",
+)
+@click.option(
+    "--progress",
+    type=click.Choice(["bar", "json"]),
+    default="bar",
+    show_default=True,
+    is_eager=True,
+    expose_value=False,
+    callback=_set_progress,
+    help="How commands report progress on stderr: a bar, or one JSON object per line "
+    '({"progress": {"stage", "done", "total"}}) for another program to read.',
 )
 @click.version_option(__version__, "--version", prog_name="texsyn", message="%(prog)s %(version)s")
 def cli() -> None:

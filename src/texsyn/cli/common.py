@@ -54,6 +54,9 @@ class State:
 
     debug: bool = False
     argv: list[str] = field(default_factory=list)
+    #: ``"bar"`` (a rich bar) or ``"json"`` (one JSON object per line, for programs such as
+    #: ``texsyn serve``), from ``texsyn --progress``
+    progress: str = "bar"
 
 
 # ---------------------------------------------------------------------------- inputs

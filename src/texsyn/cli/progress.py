@@ -2,16 +2,35 @@
 
 Every command passes a :class:`ProgressBar` as the ``callback`` of the API it calls; it
 receives the :class:`~texsyn.ops.progress.Progress` records every method reports
-(``docs/architecture.md``, "Progress") and draws them as a rich bar on stderr.
+(``docs/architecture.md``, "Progress") and draws them as a rich bar on stderr, or, with
+``texsyn --progress json``, writes them as JSON lines for another program (``texsyn serve``
+reads them; ``docs/cli.md``).
 """
 
 from __future__ import annotations
 
+import json
+import sys
 import time
 from collections.abc import Callable
 from typing import Any
 
+import click
+
 from ..ops.progress import Progress
+from .common import State
+
+#: seconds between two JSON progress lines of the same stage (a new stage and the last
+#: record of a stage are always written)
+JSON_INTERVAL = 0.1
+
+
+def progress_format() -> str:
+    """``"bar"`` or ``"json"``: what ``texsyn --progress`` asked for in this run."""
+    ctx = click.get_current_context(silent=True)
+    state = ctx.find_object(State) if ctx is not None else None
+    return state.progress if state is not None else "bar"
+
 
 __all__ = ["ProgressBar"]
 
@@ -48,9 +67,14 @@ class ProgressBar:
         self._bar: Any = None  # a rich Progress, created when the bar first shows
         self._task: Any = None
         self._stage: str | None = None
+        self._json = progress_format() == "json"
+        self._last_line = -float("inf")
 
     def __call__(self, progress: Progress) -> None:
         if not self.enabled:
+            return
+        if self._json:
+            self._write_json(progress)
             return
         description = f"{self.label} ({progress.stage})"
         if self._bar is None:
@@ -83,6 +107,23 @@ class ProgressBar:
             self._rich_task().start_time = self.start
             self._stage = progress.stage
         self._bar.update(self._task, completed=progress.done, total=progress.total, description=description)
+
+    def _write_json(self, progress: Progress) -> None:
+        """One line ``{"progress": {"label", "stage", "done", "total", "elapsed"}}`` on stderr."""
+        now = self.clock()
+        new_stage = progress.stage != self._stage
+        if not new_stage and progress.done < progress.total and now - self._last_line < JSON_INTERVAL:
+            return
+        self._stage, self._last_line = progress.stage, now
+        record = {
+            "label": self.label,
+            "stage": progress.stage,
+            "done": progress.done,
+            "total": progress.total,
+            "elapsed": round(now - self.start, 3),
+        }
+        sys.stderr.write(json.dumps({"progress": record}) + "\n")
+        sys.stderr.flush()
 
     def _rich_task(self) -> Any:
         """The rich task of the bar (a ``rich.progress.Task``)."""
