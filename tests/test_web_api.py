@@ -287,6 +287,21 @@ def test_a_huge_or_broken_request_body_is_refused(client):
     assert client.post("/api/jobs", content=b"{" + b" " * 100_000).status_code == 413
     response = client.post("/api/jobs", content=b"\xff\xfe not json")
     assert response.status_code == 400 and "JSON" in response.json()["error"]
+    response = client.post("/api/jobs", content=b"[" * 50_000)  # nested deeper than Python recurses
+    assert response.status_code == 400 and "JSON" in response.json()["error"]
+
+
+def test_the_largest_side_holds_for_the_default_output_size(tmp_path):
+    with live_server(tmp_path, max_side=200) as small, small.client() as c:
+        for mode in ("synth", "compare"):  # twice the 128x128 brick: 256x256
+            request = {"mode": mode, "exemplar": "builtin:brick", "methods": ["random_phase"]}
+            request = {k: v for k, v in request.items() if mode == "compare" or k != "methods"}
+            response = c.post("/api/jobs", json=request)
+            assert response.status_code == 422, response.text
+            assert "default output (256x256) is over the largest side 200" in response.json()["error"]
+        animated = c.post("/api/jobs", json={"mode": "animate", "exemplar": "builtin:brick", "frames": 2})
+        assert animated.status_code == 201, animated.text  # frames keep the exemplar's 128x128
+        c.post(f"/api/jobs/{animated.json()['id']}/cancel")
 
 
 def test_an_error_of_the_command_line_reaches_the_page_as_its_one_line(client):

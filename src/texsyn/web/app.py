@@ -229,7 +229,7 @@ def create_app(settings: ServerSettings | None = None, folder: str | Path | None
                 return refusal(413, f"the request is over {MAX_JSON_BYTES // 1024} KB")
         try:
             payload = json.loads(body.decode("utf-8"))
-        except (UnicodeDecodeError, ValueError):
+        except (UnicodeDecodeError, ValueError, RecursionError):  # RecursionError: nested too deep
             return refusal(400, "the request must be JSON")
         plan = await asyncio.to_thread(plan_job, payload, uploads().get, settings)
         try:
