@@ -337,6 +337,7 @@ def test_compare_and_animate_jobs(client):
     }
     compare["params"] = {"heeger_bergen": {"n_iterations": "2"}}
     animate = {"mode": "animate", "exemplar": "builtin:brick", "frames": 4, "size": [48, 48], "seed": 3}
+    animate["params"] = {"n_iterations": "5"}
     first = client.post("/api/jobs", json=compare).json()
     second = client.post("/api/jobs", json=animate).json()
     done = wait_for(client, first["id"], timeout=120)
@@ -345,10 +346,13 @@ def test_compare_and_animate_jobs(client):
     report = client.get(done["files"]["report"]["url"] + "&inline=1")
     assert report.headers["content-security-policy"].startswith("sandbox")
     assert "random_phase" in report.text and "heeger_bergen" in report.text
+    ran = client.get(done["files"]["report_json"]["url"]).json()["methods"]
+    assert [m["params"].get("n_iterations") for m in ran] == [None, 2]  # the job ran with them
     video = wait_for(client, second["id"], timeout=120)
     assert video["state"] == "done", video
     assert client.get(video["files"]["video"]["url"]).content[:4] == b"\x1a\x45\xdf\xa3"  # WebM (EBML)
-    assert client.get(video["files"]["run"]["url"]).json()["seed"] == 3
+    run = client.get(video["files"]["run"]["url"]).json()
+    assert run["seed"] == 3 and run["params"]["n_iterations"] == 5
 
 
 def test_the_queue_cancel_and_the_time_limit(tmp_path):
