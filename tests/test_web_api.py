@@ -368,3 +368,49 @@ def test_the_queue_cancel_and_the_time_limit(tmp_path):
         timed_out = wait_for(c, first["id"], timeout=30)
         assert timed_out["state"] == "failed" and "time limit" in timed_out["error"]
         assert not any(p.suffix == ".part" or ".part" in p.name for p in (tmp_path / "jobs").rglob("*"))
+
+
+def test_unknown_routes_answer_with_the_one_line_error_too(client):
+    for path in ("/api/nothing", "/api/exemplars/..%2F..%2Fetc%2Fpasswd/preview", "/static/../pyproject.toml"):
+        response = client.get(path)
+        assert response.status_code == 404 and set(response.json()) == {"error"}
+    assert set(client.put("/api/jobs").json()) == {"error"}
+
+
+def test_a_compare_report_names_the_users_file_not_the_servers_copy(server, client, uploaded):
+    request = {"mode": "compare", "exemplar": uploaded["id"], "methods": ["random_phase"], "size": [32, 32]}
+    job = wait_for(client, client.post("/api/jobs", json=request).json()["id"], timeout=120)
+    assert job["state"] == "done", job
+    data = client.get(job["files"]["report_json"]["url"]).json()
+    assert data["exemplar_path"] == "my blocks.png" and data["command_line"] == job["command_line"]
+    page = client.get(job["files"]["report"]["url"]).text
+    assert str(server.folder) not in page and "my blocks.png" in page
+
+
+def test_a_failed_measuring_step_leaves_the_output_with_a_warning(tmp_path):
+    import asyncio
+    import sys
+
+    from texsyn.web.jobs import JobManager
+    from texsyn.web.requests import DownloadFile, JobPlan
+    from texsyn.web.uploads import Exemplar
+
+    exemplar = Exemplar("builtin:brick", "builtin:brick", "builtin:brick", tmp_path / "p.png", 8, 8, 1)
+    make = [sys.executable, "-c", "open('texture.png', 'wb').write(b'png')"]
+    fail = [sys.executable, "-c", "import sys; sys.stderr.write('texsyn: error: no memory left\\n'); sys.exit(1)"]
+    plan = JobPlan("synth", "x", exemplar, [make, fail], "texsyn synth ...", 1, {}, optional_from=1)
+    plan.files = {"image": DownloadFile("texture.png", "t.png", "image/png")}
+
+    async def run() -> dict:
+        manager = JobManager(tmp_path / "jobs", workers=1, queue_limit=1, timeout=60)
+        job = manager.submit(plan)
+        while job.state not in ("done", "failed", "cancelled"):
+            await asyncio.sleep(0.02)
+        return job.public()
+
+    record = asyncio.run(run())
+    assert record["state"] == "done" and "image" in record["files"]
+    assert record["warning"] == "the output is ready, but measuring it failed: no memory left"
+    plan.optional_from = None  # the same failure in a required step fails the job
+    record = asyncio.run(run())
+    assert record["state"] == "failed" and record["error"] == "no memory left"

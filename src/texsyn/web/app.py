@@ -27,6 +27,7 @@ from pathlib import Path
 
 from fastapi import FastAPI, Request
 from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, Response, StreamingResponse
+from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from .. import data
 from .._validation import OneOf, Range
@@ -157,6 +158,11 @@ def create_app(settings: ServerSettings | None = None, folder: str | Path | None
     @app.exception_handler(UploadError)
     async def _upload_error(request: Request, exc: UploadError):
         return refusal(exc.status, str(exc))
+
+    @app.exception_handler(StarletteHTTPException)
+    async def _http_error(request: Request, exc: StarletteHTTPException):
+        messages = {404: "no such page or file", 405: "method not allowed here"}
+        return refusal(exc.status_code, messages.get(exc.status_code, str(exc.detail)))
 
     @app.exception_handler(InputError)
     async def _input_error(request: Request, exc: InputError):

@@ -56,6 +56,9 @@ class JobPlan:
     seed: int | None
     request: dict
     files: dict[str, DownloadFile] = field(default_factory=dict)
+    #: the steps from this index on add to a finished result (measuring): their failure
+    #: leaves the job done, with a warning, and its output downloadable
+    optional_from: int | None = None
 
 
 def _fail(message: str) -> InputError:
@@ -244,6 +247,7 @@ def plan_job(request, exemplar_of, settings: ServerSettings) -> JobPlan:
         seed,
         request,
     )
+    plan.optional_from = 1
     plan.files = {
         "image": DownloadFile("texture.png", f"{stem}.png", "image/png"),
         "map": DownloadFile("map.png", f"{stem}-map.png", "image/png", step=1),
