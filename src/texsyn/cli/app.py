@@ -19,8 +19,8 @@ or none through :class:`texsyn.io.OutputSet`: nothing is created or replaced on 
 
 This module holds the ``texsyn`` group, the entry point and the mapping of every outcome to
 one line and an exit status; the commands are in :mod:`~texsyn.cli.synthesis`,
-:mod:`~texsyn.cli.modification`, :mod:`~texsyn.cli.animation`, :mod:`~texsyn.cli.comparison`
-and :mod:`~texsyn.cli.listing`, each imported when its command runs (:data:`COMMANDS`).
+:mod:`~texsyn.cli.modification`, :mod:`~texsyn.cli.animation`, :mod:`~texsyn.cli.editing`,
+:mod:`~texsyn.cli.comparison` and :mod:`~texsyn.cli.listing`, each imported when its command runs (:data:`COMMANDS`).
 """
 
 from __future__ import annotations
@@ -73,6 +73,8 @@ COMMANDS = {
     "synth": "synth",
     "modify": "modify",
     "animate": "animate",
+    "fill": "fill_command",
+    "transfer": "transfer_command",
     "compare": "compare",
     "methods": "list_methods",
 }
@@ -84,6 +86,8 @@ _command_function, _ = lazy_exports(
         "synth": "synthesis",
         "modify": "modification",
         "animate": "animation",
+        "fill_command": "editing",
+        "transfer_command": "editing",
         "compare": "comparison",
         "list_methods": "listing",
     },

@@ -135,6 +135,7 @@ def fill_blocks(
     *,
     seed: np.ndarray | None = None,
     reporter: Reporter | None = None,
+    known: np.ndarray | None = None,
 ) -> np.ndarray:
     """Fill ``canvas`` block by block in raster order (rows, then columns within a row).
 
@@ -159,19 +160,29 @@ def fill_blocks(
         but is not reported (Raad et al. 2016, Algorithm 2, line 1).
     reporter : Reporter, optional
         Receives ``(done, total)`` after every block, ``total = len(rows) * len(cols)``.
+    known : ndarray of bool, shape (H, W), optional
+        Canvas pixels known before the loop (hole filling, ``docs/editing.md``): the blocks
+        see them as known, and a block whose pixels are all known is skipped (counted as
+        done). By default nothing is known.
 
     Returns
     -------
     ndarray of bool, shape (H, W)
-        Which canvas pixels were written.
+        Which canvas pixels were written (or known from the start).
     """
-    known = np.zeros(canvas.shape[:2], dtype=bool)
+    skip_known = known is not None
+    known = np.zeros(canvas.shape[:2], dtype=bool) if known is None else np.array(known, dtype=bool)
     total = len(rows) * len(cols)
     done = 0
     for x in rows:
         for y in cols:
             window = canvas[x : x + size, y : y + size]
             mask = known[x : x + size, y : y + size]
+            if skip_known and mask.all():
+                done += 1
+                if reporter is not None:
+                    reporter(done, total)
+                continue
             if done == 0 and seed is not None:
                 window[...] = seed
                 mask[...] = True
@@ -337,6 +348,7 @@ def grow_pixels(
     rng: np.random.Generator,
     reporter: Reporter | None = None,
     max_batch: int = 256,
+    known: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Grow a texture pixel by pixel from a seed (Efros and Leung 1999, section 2).
 
@@ -376,16 +388,23 @@ def grow_pixels(
         Receives ``(filled, total)`` after every pass.
     max_batch : int
         Most pixels searched in one matrix product (the result does not depend on it).
+    known : (ndarray, ndarray, ndarray), optional
+        Constrained synthesis (hole filling, the paper's section 2 and ``docs/editing.md``):
+        ``(values (H, W, C), mask (H, W) of bool, source (H, W, 2))``, the pixels known
+        from the start, their values and their source (``-1`` for none). No seed is placed
+        then; the unknown pixels grow inwards from the known ones, by the same passes, and
+        the known pixels are returned unchanged.
 
     Returns
     -------
     values : ndarray, shape (H, W, C), float64
-        The synthesised channels (every pixel equals the exemplar pixel its source names).
+        The synthesised channels (every synthesised pixel equals the exemplar pixel its
+        source names).
     source : ndarray of int64, shape (H, W, 2)
         Exemplar ``(row, col)`` of every output pixel.
     """
     ex = sampler.exemplar
-    ex_h, ex_w, channels = ex.shape
+    channels = ex.shape[2]
     height, width = shape
     window = sampler.window
     r = window // 2
@@ -397,23 +416,15 @@ def grow_pixels(
     )
     values, filled, source = canvas.values, canvas.filled, canvas.source
 
-    if seed_block is None:
-        sh = sw = int(min(seed_size, height, width, ex_h, ex_w))
-        si, sj = int(rng.integers(ex_h - sh + 1)), int(rng.integers(ex_w - sw + 1))
+    if known is None:
+        n_filled = _place_seed(canvas, ex, seed_size, seed_block, rng)
     else:
-        si, sj, sh, sw = (int(v) for v in seed_block)
-        if sh > height:
-            si, sh = si + (sh - height) // 2, height
-        if sw > width:
-            sj, sw = sj + (sw - width) // 2, width
-    top, left = (height - sh) // 2, (width - sw) // 2
-    values[top + r : top + r + sh, left + r : left + r + sw] = ex[si : si + sh, sj : sj + sw]
-    filled[top + r : top + r + sh, left + r : left + r + sw] = True
-    seed_rows, seed_cols = np.meshgrid(np.arange(sh), np.arange(sw), indexing="ij")
-    source[top : top + sh, left : left + sw, 0] = seed_rows + si
-    source[top : top + sh, left : left + sw, 1] = seed_cols + sj
-
-    n_filled, total = sh * sw, height * width
+        start_values, start_mask, start_source = known
+        values[r : r + height, r : r + width] = start_values
+        filled[r : r + height, r : r + width] = start_mask
+        source[...] = start_source
+        n_filled = int(np.count_nonzero(start_mask))
+    total = height * width
     threshold = float(max_error)
     near = np.zeros((height + 2, width + 2), dtype=bool)  # filled pixels, dilated by one
     # one thread computes the next chunk's lower bounds while this one is matched
@@ -444,6 +455,29 @@ def grow_pixels(
             if reporter is not None:
                 reporter(n_filled, total)
     return values[r : r + height, r : r + width], source
+
+
+def _place_seed(canvas, ex, seed_size, seed_block, rng) -> int:
+    """The seed of :func:`grow_pixels` at the centre of the canvas; pixels placed."""
+    ex_h, ex_w = ex.shape[:2]
+    height, width = canvas.source.shape[:2]
+    r = canvas.r
+    if seed_block is None:
+        sh = sw = int(min(seed_size, height, width, ex_h, ex_w))
+        si, sj = int(rng.integers(ex_h - sh + 1)), int(rng.integers(ex_w - sw + 1))
+    else:
+        si, sj, sh, sw = (int(v) for v in seed_block)
+        if sh > height:
+            si, sh = si + (sh - height) // 2, height
+        if sw > width:
+            sj, sw = sj + (sw - width) // 2, width
+    top, left = (height - sh) // 2, (width - sw) // 2
+    canvas.values[top + r : top + r + sh, left + r : left + r + sw] = ex[si : si + sh, sj : sj + sw]
+    canvas.filled[top + r : top + r + sh, left + r : left + r + sw] = True
+    seed_rows, seed_cols = np.meshgrid(np.arange(sh), np.arange(sw), indexing="ij")
+    canvas.source[top : top + sh, left : left + sw, 0] = seed_rows + si
+    canvas.source[top : top + sh, left : left + sw, 1] = seed_cols + sj
+    return sh * sw
 
 
 @dataclass

@@ -2,17 +2,19 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Annotated
 
 import numpy as np
 
-from .._validation import OneOf, Range
+from .._validation import OneOf, Range, as_exemplar, normalize_rng
 from ..drivers.raster import grow_pixels
 from ..errors import InputError
 from ..ops.kcoherence import CoherentWindows
 from ..ops.nonparametric import NonParametricSampler
-from ..ops.progress import Reporter
-from ._base import TextureSynthesizer
+from ..ops.patches import as_channels
+from ..ops.progress import Progress, Reporter
+from ._base import SynthesisResult, TextureSynthesizer
 from ._memory import nonparametric_bytes, output_bytes, shape_dims
 
 __all__ = ["EfrosLeung"]
@@ -154,3 +156,72 @@ class EfrosLeung(TextureSynthesizer):
             reporter=Reporter(callback, "pixels"),
         )
         return values, source
+
+    def fill(
+        self,
+        image: np.ndarray,
+        known: np.ndarray,
+        *,
+        exemplar_mask: np.ndarray | None = None,
+        rng: None | int | np.random.Generator = None,
+        callback: Callable[[Progress], None] | None = None,
+    ) -> SynthesisResult:
+        """Constrained synthesis (section 2): fill the unknown pixels of ``image``.
+
+        The known pixels stay as they are; the unknown ones grow inwards from them by the
+        passes of synthesis (:func:`texsyn.drivers.raster.grow_pixels`): "onion peel", each
+        pass taking the unknown pixels that touch known ones, those with the most known
+        pixels in their window first, each the centre of an exemplar window within
+        ``(1 + tolerance)`` of the best distance on its known pixels (``docs/editing.md``).
+        The search is the exact one (``search='approximate'`` is not used here).
+
+        Parameters
+        ----------
+        image : ndarray, shape (H, W) or (H, W, C)
+            Values in [0, 1], the exemplar's channels; unknown pixels may hold anything.
+        known : ndarray of bool, shape (H, W)
+            The pixels to keep.
+        exemplar_mask : ndarray of bool, optional
+            The exemplar pixels that may be used: only the windows lying wholly in it are
+            candidates (filling from the rest of the image itself). All by default.
+        rng, callback
+            As in :meth:`sample`; progress stage ``"pixels"``.
+
+        Returns
+        -------
+        SynthesisResult
+            The filled image (float32) and the exemplar position of every pixel (``-1``
+            for the known pixels).
+        """
+        ex = as_channels(self._require_fitted())
+        img = as_channels(as_exemplar(image, name="image"))
+        mask = np.asarray(known, dtype=bool)
+        if mask.shape != img.shape[:2] or img.shape[2] != ex.shape[2]:
+            raise InputError(
+                f"image {img.shape} and mask {mask.shape} must have one size, and the exemplar's "
+                f"{ex.shape[2]} channel(s)"
+            )
+        if exemplar_mask is not None:
+            try:
+                sampler = NonParametricSampler(ex, self.window_size, allowed=exemplar_mask)
+            except ValueError:
+                raise InputError(
+                    f"no {self.window_size}x{self.window_size} window of the exemplar lies wholly in its "
+                    "known pixels; give a smaller window_size or an exemplar"
+                ) from None
+        elif isinstance(self.sampler_, NonParametricSampler):
+            sampler = self.sampler_
+        else:
+            sampler = NonParametricSampler(ex, self.window_size)
+        start_source = np.full(mask.shape + (2,), -1, dtype=np.int64)
+        values, source = grow_pixels(
+            sampler,
+            mask.shape,
+            tolerance=self.tolerance,
+            max_error=self.max_error,
+            rng=normalize_rng(rng),
+            reporter=Reporter(callback, "pixels"),
+            known=(img, mask, start_source),
+        )
+        values = np.where(mask[..., None], img, values)
+        return SynthesisResult(self._as_output(values), np.asarray(source, dtype=np.int32))

@@ -108,6 +108,11 @@ class NonParametricSampler:
         Any stack of real channels; distances sum over channels.
     window : int
         Odd side ``w`` of the square neighbourhood.
+    allowed : ndarray of bool, shape (H0, W0), optional
+        Exemplar pixels that may be used (hole filling from the rest of the image,
+        ``docs/editing.md``): only the windows lying wholly in it are candidates. By
+        default every window is. With it, :meth:`match` (the float64 matrix product) is the
+        search, not the float32 screen.
 
     Examples
     --------
@@ -118,17 +123,28 @@ class NonParametricSampler:
     ([[1, 1]], True)
     """
 
-    def __init__(self, exemplar: np.ndarray, window: int = 11):
+    def __init__(self, exemplar: np.ndarray, window: int = 11, allowed: np.ndarray | None = None):
         self.exemplar = as_channels(np.asarray(exemplar, dtype=np.float64))
         self.window = int(window)
         radius = self.window // 2
         patches, anchors = extract_patches(self.exemplar, self.window)
         self.centres = anchors + radius
-        self.bank = WeightedPatchBank(patches)
         grid = np.arange(self.window) - radius
         sigma = self.window / 6.4
         self.gauss = np.exp(-(grid[:, None] ** 2 + grid[None, :] ** 2) / (2.0 * sigma**2))
-        self._screen = ScreenBank(self.exemplar, patches, self.gauss)
+        self.allowed_windows: np.ndarray | None = None
+        if allowed is not None:
+            inside = np.lib.stride_tricks.sliding_window_view(
+                np.asarray(allowed, dtype=bool), (window, window)
+            )
+            whole: np.ndarray = np.all(inside, axis=(2, 3))
+            keep = whole[anchors[:, 0], anchors[:, 1]]
+            if not keep.any():
+                raise ValueError(f"no {window}x{window} window lies wholly in the allowed pixels")
+            patches, self.centres = patches[keep], self.centres[keep]
+            self.allowed_windows = keep
+        self.bank = WeightedPatchBank(patches)
+        self._screen = ScreenBank(self.exemplar, patches, self.gauss) if allowed is None else None
 
     @property
     def n_windows(self) -> int:
@@ -173,7 +189,7 @@ class NonParametricSampler:
 
         False for a subclass with its own :meth:`match` (its rule is not the screened one).
         """
-        return type(self).match is NonParametricSampler.match
+        return type(self).match is NonParametricSampler.match and self._screen is not None
 
     def screen(
         self, windows: np.ndarray, known: np.ndarray, out: tuple[np.ndarray, np.ndarray] | None = None
@@ -189,10 +205,12 @@ class NonParametricSampler:
         out : (ndarray, ndarray), optional
             :meth:`screen_buffers` of at least ``k`` rows, used by the result.
         """
+        assert self._screen is not None, "a sampler with allowed windows does not screen"
         return self._screen.screen(windows, known, out)
 
     def screen_buffers(self, rows: int) -> tuple[np.ndarray, np.ndarray]:
         """Room for the bounds of up to ``rows`` windows (:meth:`screen`'s ``out``)."""
+        assert self._screen is not None, "a sampler with allowed windows does not screen"
         return self._screen.buffers(rows)
 
     def match_screened(
@@ -229,6 +247,7 @@ class NonParametricSampler:
         error : ndarray, shape (k,)
         accepted : ndarray of bool, shape (k,)
         """
+        assert self._screen is not None, "a sampler with allowed windows does not screen"
         choice, error, sure = self._screen.choose(windows, known, tolerance, uniforms, screen, rows, accept)
         if not sure:
             source, error = self.match(windows, known, tolerance, uniforms)
@@ -262,6 +281,7 @@ class NonParametricSampler:
         written : int
             Pixels filled.
         """
+        assert self._screen is not None, "a sampler with allowed windows does not screen"
         return self._screen.fill(
             canvas, filled, source, pixels, batches, screen, chunk_start, self.centres, tolerance, accept
         )
