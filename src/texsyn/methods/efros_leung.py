@@ -11,6 +11,7 @@ from .._validation import OneOf, Range, as_exemplar, normalize_rng
 from ..drivers.raster import grow_pixels
 from ..errors import InputError
 from ..ops.kcoherence import CoherentWindows
+from ..ops.linalg import fixed_order
 from ..ops.nonparametric import NonParametricSampler
 from ..ops.patches import as_channels
 from ..ops.progress import Progress, Reporter
@@ -157,6 +158,7 @@ class EfrosLeung(TextureSynthesizer):
         )
         return values, source
 
+    @fixed_order
     def fill(
         self,
         image: np.ndarray,

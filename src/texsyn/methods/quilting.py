@@ -23,6 +23,7 @@ from ..drivers.raster import (
     raster_positions,
 )
 from ..errors import InputError
+from ..ops.linalg import fixed_order
 from ..ops.patches import as_channels
 from ..ops.progress import Progress, Reporter
 from ..ops.seams import cut_mask
@@ -213,6 +214,7 @@ class Quilting(TextureSynthesizer):
         return image, source
 
     # ------------------------------------------------------------------ editing (docs/editing.md)
+    @fixed_order
     def fill(
         self,
         image: np.ndarray,
@@ -295,6 +297,7 @@ class Quilting(TextureSynthesizer):
         canvas[..., :c] = np.where(known[..., None], img, canvas[..., :c])
         return SynthesisResult(self._as_output(canvas[..., :c]), canvas[..., c:].astype(np.int32))
 
+    @fixed_order
     def transfer(
         self,
         texture_map: np.ndarray,
@@ -360,6 +363,7 @@ class Quilting(TextureSynthesizer):
             previous = image
         return SynthesisResult(self._as_output(image), source.astype(np.int32))
 
+    @fixed_order
     def sample_guided(
         self,
         guide_source: np.ndarray,
