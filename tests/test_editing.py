@@ -136,8 +136,10 @@ def test_fill_command(tmp_path, capsys):
     assert np.load(tmp_path / "map.npy").shape == truth.shape[:2] + (2,)
     # bad inputs: one line, exit 2, no file
     write_image(tmp_path / "small.png", hole[:-3])
+    write_image(tmp_path / "grey.png", 0.5 * hole + 0.25)
     for bad, message in [
         (["--mask", str(tmp_path / "small.png")], "same size"),
+        (["--mask", str(tmp_path / "grey.png")], "not black and white"),
         (["--mask", str(tmp_path / "mask.png"), "-m", "cwt"], "cannot fill holes"),
         ([], "alpha"),
     ]:
@@ -161,19 +163,20 @@ def luminance_correlation(image, target) -> float:
 def test_transfer_follows_the_target_with_texture_blocks():
     texture = texsyn.data.exemplar("brick", size=64)
     target = transfer_target()
-    result = transfer(texture, target, alpha=0.1, iterations=2, patch_size=12, rng=0)
+    result = transfer(texture, target, alpha=0.1, iterations=3, patch_size=12, rng=0)
     assert result.image.shape == target.shape + texture.shape[2:]
-    assert luminance_correlation(result.image, target) > 0.6
+    # measured 0.76 to 0.79 over seeds 0-5 (two iterations: 0.64 to 0.66)
+    assert luminance_correlation(result.image, target) > 0.65
     # every pixel is the texture pixel its source names
     src = result.source_map
     assert np.array_equal(result.image, texture.astype(np.float32)[src[..., 0], src[..., 1]])
     # patches, not pixels: most pixels continue their left neighbour's source
     runs = np.all(src[:, 1:] - src[:, :-1] == (0, 1), axis=-1).mean()
-    assert runs > 0.7
+    assert runs > 0.6  # measured 0.76
     # a quilting that ignores the target (alpha = 1: the overlap alone) does not follow it
     ignoring = transfer(texture, target, alpha=1.0, iterations=1, patch_size=12, rng=0)
     assert abs(luminance_correlation(ignoring.image, target)) < 0.4
-    again = transfer(texture, target, alpha=0.1, iterations=2, patch_size=12, rng=0)
+    again = transfer(texture, target, alpha=0.1, iterations=3, patch_size=12, rng=0)
     assert np.array_equal(again.image, result.image)
 
 
