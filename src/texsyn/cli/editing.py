@@ -9,7 +9,7 @@ from __future__ import annotations
 import click
 import numpy as np
 
-from ..editing import FILL_METHODS, fill, hole_mask, transfer
+from ..editing import FILL_METHODS, TRANSFER_METHODS, fill, hole_mask, transfer
 from ..errors import InputError
 from ..io import read_image, sidecar_path
 from ..io.writing import JSON_FORMATS
@@ -155,6 +155,13 @@ def fill_command(
 @click.argument("target")
 @output_option("Output image (.png, .jpg, .tif); it has TARGET's size and TEXTURE's channels.")
 @click.option(
+    "-m",
+    "--method",
+    default="quilting",
+    show_default=True,
+    help=f"Transfer method: {', '.join(TRANSFER_METHODS)} (efros_leung: one pass, --iterations 1).",
+)
+@click.option(
     "--alpha",
     type=Number(0.0, 1.0),
     default=0.1,
@@ -164,9 +171,7 @@ def fill_command(
 @click.option(
     "--iterations",
     type=click.IntRange(1, 10),
-    default=3,
-    show_default=True,
-    help="Passes, the block shrinking by a third after each.",
+    help="Passes, the block shrinking by a third after each [default: 3; efros_leung: 1, its only choice].",
 )
 @click.option(
     "--block",
@@ -200,6 +205,7 @@ def transfer_command(
     texture,
     target,
     output,
+    method,
     alpha,
     iterations,
     block,
@@ -218,15 +224,21 @@ def transfer_command(
     Blocks of TEXTURE are quilted so that the output's blurred luminance follows TARGET's
     (Efros and Freeman 2001, section 3). Also writes OUTPUT.json.
     """
+    if method not in TRANSFER_METHODS:
+        raise InputError(
+            f"method {method!r} does not transfer textures; methods that do: {', '.join(TRANSFER_METHODS)}"
+        )
     depth = int(bit_depth)
-    parameters = parse_params("quilting", params)
+    parameters = parse_params(method, params)
     if block is not None:
+        if method != "quilting":
+            raise click.UsageError("--block is quilting's block size; efros_leung takes -p window_size=...")
         if "patch_size" in parameters:
             raise click.UsageError("give --block or -p patch_size=..., not both")
         parameters["patch_size"] = block
     if (texture_map is None) != (target_map is None):
         raise click.UsageError("give both --texture-map and --target-map, or neither")
-    synthesizer = make_method("quilting", **parameters)
+    synthesizer = make_method(method, **parameters)
     outputs = output_set(overwrite)
     for path, what in (
         (texture, "TEXTURE"),
@@ -267,7 +279,7 @@ def transfer_command(
         "transfer",
         outputs={"image": out_path, "source_map": map_path, "sidecar": side_path},
         inputs={"texture": texture, "target": target, "texture_map": texture_map, "target_map": target_map},
-        method="quilting",
+        method=method,
         params=synthesizer.get_params(),
         seed=seed,
         options={"alpha": alpha, "iterations": iterations, "blur": blur, "bit_depth": depth},

@@ -42,6 +42,7 @@ import numpy as np
 from ..ops.canvas import padded_canvas
 from ..ops.kcoherence import CoherentWindows
 from ..ops.nonparametric import NonParametricSampler, schedule_batches
+from ..ops.patches import as_channels
 from ..ops.progress import Reporter
 from ..ops.window_screen import gather_windows
 
@@ -349,6 +350,7 @@ def grow_pixels(
     reporter: Reporter | None = None,
     max_batch: int = 256,
     known: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    guide: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Grow a texture pixel by pixel from a seed (Efros and Leung 1999, section 2).
 
@@ -394,6 +396,11 @@ def grow_pixels(
         from the start, their values and their source (``-1`` for none). No seed is placed
         then; the unknown pixels grow inwards from the known ones, by the same passes, and
         the known pixels are returned unchanged.
+    guide : ndarray, shape (H, W) or (H, W, G), optional
+        The output's guide map, for a sampler built with the exemplar's
+        (:class:`~texsyn.ops.nonparametric.NonParametricSampler` ``guide``; guided
+        synthesis, ``docs/editing.md``): every search gets the guide around its pixel
+        (the borders repeated). The search is then the matrix product.
 
     Returns
     -------
@@ -415,6 +422,12 @@ def grow_pixels(
         r,
     )
     values, filled, source = canvas.values, canvas.filled, canvas.source
+    if guide is not None:
+        canvas.guide_windows = np.lib.stride_tricks.sliding_window_view(
+            np.pad(as_channels(np.asarray(guide, dtype=np.float64)), ((r, r), (r, r), (0, 0)), mode="edge"),
+            (window, window),
+            axis=(0, 1),
+        )
 
     if known is None:
         n_filled = _place_seed(canvas, ex, seed_size, seed_block, rng)
@@ -496,6 +509,7 @@ class _Canvas:
             self.values, (window, window), axis=(0, 1)
         )
         self.known_windows = np.lib.stride_tricks.sliding_window_view(self.filled, (window, window))
+        self.guide_windows: np.ndarray | None = None  # the output's guide, for guided synthesis
 
 
 class _ExactPass:
@@ -562,7 +576,11 @@ class _ExactPass:
         members = slice(int(bounds[batch]), int(bounds[batch + 1]))
         pr, pc = rows[members], cols[members]
         windows, known = np.moveaxis(canvas.value_windows[pr, pc], 1, 3), canvas.known_windows[pr, pc]
-        src, err = sampler.match(windows, known, tolerance, uniforms[members])
+        if canvas.guide_windows is None:
+            src, err = sampler.match(windows, known, tolerance, uniforms[members])
+        else:
+            guides = np.moveaxis(canvas.guide_windows[pr, pc], 1, 3)
+            src, err = sampler.match_guided(windows, known, tolerance, uniforms[members], guides)
         ok = err <= threshold
         pr, pc, src = pr[ok], pc[ok], src[ok]
         canvas.values[pr + r, pc + r] = sampler.exemplar[src[:, 0], src[:, 1]]

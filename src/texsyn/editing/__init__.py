@@ -21,11 +21,12 @@ from .._lazy import lazy_exports
 if TYPE_CHECKING:  # the names for type checkers; at run time ``__getattr__`` loads them
     from .guided import GUIDED_METHODS, synthesize_guided
     from .inpainting import FILL_METHODS, fill, hole_mask
-    from .texture_transfer import correspondence_map, transfer
+    from .texture_transfer import TRANSFER_METHODS, correspondence_map, transfer
 
 __all__ = [
     "FILL_METHODS",
     "GUIDED_METHODS",
+    "TRANSFER_METHODS",
     "correspondence_map",
     "fill",
     "hole_mask",
@@ -41,6 +42,7 @@ __getattr__, __dir__ = lazy_exports(
         "hole_mask": "inpainting",
         "GUIDED_METHODS": "guided",
         "synthesize_guided": "guided",
+        "TRANSFER_METHODS": "texture_transfer",
         "correspondence_map": "texture_transfer",
         "transfer": "texture_transfer",
     },

@@ -20,7 +20,7 @@ from ..ops.progress import Progress
 __all__ = ["GUIDED_METHODS", "synthesize_guided"]
 
 #: the methods that follow guide maps (``docs/editing.md`` says why the others do not)
-GUIDED_METHODS = ("quilting",)
+GUIDED_METHODS = ("quilting", "efros_leung")
 
 
 def synthesize_guided(

@@ -227,3 +227,43 @@ class EfrosLeung(TextureSynthesizer):
         )
         values = np.where(mask[..., None], img, values)
         return SynthesisResult(self._as_output(values), np.asarray(source, dtype=np.int32))
+
+    @fixed_order
+    def sample_guided(
+        self,
+        guide_source: np.ndarray,
+        guide_target: np.ndarray,
+        *,
+        weight: float = 1.0,
+        rng: None | int | np.random.Generator = None,
+        callback: Callable[[Progress], None] | None = None,
+    ) -> SynthesisResult:
+        """Guided synthesis: grow a texture whose guide map follows ``guide_target``.
+
+        The growth of :meth:`sample` (section 2), each pixel's distance adding ``weight``
+        times the Gaussian-weighted mean squared difference between the exemplar window's
+        guide (``guide_source``, the exemplar's size) and the output's guide around the
+        pixel (``guide_target``, the output's size, which the output takes), over the whole
+        window, the pixel itself included (``docs/editing.md``). The search is the exact
+        float64 matrix product (the float32 screen of synthesis knows nothing of guides).
+        """
+        ex = as_channels(self._require_fitted())
+        source = as_channels(np.asarray(guide_source, dtype=np.float64))
+        target = as_channels(np.asarray(guide_target, dtype=np.float64))
+        if source.shape[:2] != ex.shape[:2] or source.shape[2] != target.shape[2]:
+            raise InputError(
+                f"the exemplar's guide ({source.shape[1]}x{source.shape[0]}) must have the exemplar's size "
+                f"({ex.shape[1]}x{ex.shape[0]}) and the channels of the output's guide"
+            )
+        sampler = NonParametricSampler(ex, self.window_size, guide=source, guide_weight=weight)
+        values, source_map = grow_pixels(
+            sampler,
+            target.shape[:2],
+            tolerance=self.tolerance,
+            max_error=self.max_error,
+            seed_size=self.seed_size,
+            rng=normalize_rng(rng),
+            reporter=Reporter(callback, "pixels"),
+            guide=target,
+        )
+        return SynthesisResult(self._as_output(values), np.asarray(source_map, dtype=np.int32))

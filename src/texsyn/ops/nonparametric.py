@@ -113,6 +113,13 @@ class NonParametricSampler:
         ``docs/editing.md``): only the windows lying wholly in it are candidates. By
         default every window is. With it, :meth:`match` (the float64 matrix product) is the
         search, not the float32 screen.
+    guide : ndarray, shape (H0, W0) or (H0, W0, G), optional
+        The exemplar's guide map (guided synthesis, ``docs/editing.md``): :meth:`match` then
+        takes the output's guide windows too and adds ``guide_weight`` times their
+        Gaussian-weighted mean squared difference (over the whole window) to the distance.
+        The search is :meth:`match` then.
+    guide_weight : float
+        Weight of the guide term.
 
     Examples
     --------
@@ -123,11 +130,24 @@ class NonParametricSampler:
     ([[1, 1]], True)
     """
 
-    def __init__(self, exemplar: np.ndarray, window: int = 11, allowed: np.ndarray | None = None):
+    def __init__(
+        self,
+        exemplar: np.ndarray,
+        window: int = 11,
+        allowed: np.ndarray | None = None,
+        guide: np.ndarray | None = None,
+        guide_weight: float = 1.0,
+    ):
         self.exemplar = as_channels(np.asarray(exemplar, dtype=np.float64))
         self.window = int(window)
         radius = self.window // 2
         patches, anchors = extract_patches(self.exemplar, self.window)
+        self.guide_weight = float(guide_weight)
+        self.guide_channels = 0
+        if guide is not None:
+            guide = as_channels(np.asarray(guide, dtype=np.float64))
+            self.guide_channels = guide.shape[2]
+            patches = np.concatenate([patches, extract_patches(guide, self.window)[0]], axis=1)
         self.centres = anchors + radius
         grid = np.arange(self.window) - radius
         sigma = self.window / 6.4
@@ -144,7 +164,8 @@ class NonParametricSampler:
             patches, self.centres = patches[keep], self.centres[keep]
             self.allowed_windows = keep
         self.bank = WeightedPatchBank(patches)
-        self._screen = ScreenBank(self.exemplar, patches, self.gauss) if allowed is None else None
+        plain = allowed is None and guide is None
+        self._screen = ScreenBank(self.exemplar, patches, self.gauss) if plain else None
 
     @property
     def n_windows(self) -> int:
@@ -174,6 +195,8 @@ class NonParametricSampler:
         error : ndarray, shape (k,)
             Its distance (Gaussian-weighted SSD per unit weight).
         """
+        if self.guide_channels:
+            raise ValueError("a sampler with a guide is searched by match_guided")
         k, channels = windows.shape[0], self.exemplar.shape[2]
         weights = known * self.gauss
         norm = weights.sum(axis=(1, 2))
@@ -181,6 +204,42 @@ class NonParametricSampler:
         d = self.bank.distances(windows.reshape(k, -1), full_w.reshape(k, -1))
         d /= norm[:, None]
         choice, error = _pick_candidates(d, float(tolerance), uniforms)
+        return self.centres[choice], error
+
+    def match_guided(
+        self,
+        windows: np.ndarray,
+        known: np.ndarray,
+        tolerance: float,
+        uniforms: np.ndarray,
+        guides: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`match` for a sampler built with a ``guide`` (guided synthesis, ``docs/editing.md``).
+
+        The distance is the known pixels' Gaussian-weighted SSD per unit weight (as in
+        :meth:`match`) plus ``guide_weight`` times the Gaussian-weighted SSD per unit weight
+        of the guides over the whole window, its centre included: one matrix product.
+
+        Parameters
+        ----------
+        windows, known, tolerance, uniforms
+            As for :meth:`match`.
+        guides : ndarray, shape (k, w, w, G)
+            The output's guide around each pixel.
+        """
+        k, channels, g = windows.shape[0], self.exemplar.shape[2], self.guide_channels
+        if not g:
+            raise ValueError("match_guided needs a sampler built with a guide")
+        weights = known * self.gauss
+        weights = weights / weights.sum(axis=(1, 2))[:, None, None]
+        colour_w = np.broadcast_to(weights[..., None], weights.shape + (channels,))
+        guide_w = np.broadcast_to(
+            (self.guide_weight / self.gauss.sum()) * self.gauss[None, :, :, None],
+            (k,) + self.gauss.shape + (g,),
+        )
+        queries = np.concatenate([windows.reshape(k, -1), guides.reshape(k, -1)], axis=1)
+        all_w = np.concatenate([colour_w.reshape(k, -1), guide_w.reshape(k, -1)], axis=1)
+        choice, error = _pick_candidates(self.bank.distances(queries, all_w), float(tolerance), uniforms)
         return self.centres[choice], error
 
     @property
