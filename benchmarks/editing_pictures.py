@@ -54,7 +54,9 @@ def fill_pictures(out: Path) -> None:
     shown = np.repeat(image[..., None], 3, axis=2)
     shown[hole] = (1.0, 0.0, 1.0)  # the hole in magenta
     by_pixels = timed("fill efros_leung", lambda: fill(image, hole, method="efros_leung", rng=0).image)
-    by_blocks = timed("fill quilting", lambda: fill(image, hole, method="quilting", patch_size=24, rng=0).image)
+    by_blocks = timed(
+        "fill quilting", lambda: fill(image, hole, method="quilting", patch_size=24, rng=0).image
+    )
     write_image(out / "editing_fill.png", row([shown, by_pixels, by_blocks]))
 
 
