@@ -287,3 +287,17 @@ def test_efros_leung_guided_and_transfer():
         transfer(brick, aim, method="efros_leung", iterations=2)
     with pytest.raises(InputError, match="does not transfer"):
         transfer(brick, aim, method="heeger_bergen")
+
+
+@pytest.mark.parametrize("method, params", FILLERS)
+def test_fill_within_a_context(method, params):
+    truth = periodic_texture((90, 96), colour=False)
+    hole = np.zeros(truth.shape, bool)
+    hole[50:62, 60:74] = True
+    result = fill(np.where(hole, 0.0, truth), hole, method=method, context=16, rng=0, **params)
+    assert np.array_equal(result.image[~hole], truth[~hole].astype(np.float32))
+    src = result.source_map[hole]
+    assert src[:, 0].min() >= 50 - 16 and src[:, 1].min() >= 60 - 16  # copied from near the hole
+    assert src[:, 0].max() < 62 + 16 and src[:, 1].max() < 74 + 16
+    assert not hole[src[:, 0], src[:, 1]].any()
+    assert hole_error(result.image, truth, hole) < 0.05 * min(baselines(truth, hole))

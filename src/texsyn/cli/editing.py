@@ -77,6 +77,12 @@ def _position_picture(shape: tuple[int, ...]):
     "--exemplar",
     help="Texture to copy from (an image file or builtin:NAME) [default: the known part of IMAGE].",
 )
+@click.option(
+    "--context",
+    type=click.IntRange(1, 100_000),
+    metavar="N",
+    help="Without --exemplar, copy only from within N pixels of the hole (a large photo) [default: the whole image].",
+)
 @seed_option("output")
 @param_option("Method parameter (repeatable).")
 @click.option("--source-map", type=click.Path(dir_okay=False), help=_SOURCE_MAP_HELP)
@@ -84,7 +90,7 @@ def _position_picture(shape: tuple[int, ...]):
 @overwrite_option()
 @quiet_option
 def fill_command(
-    image, mask, output, method, exemplar, seed, params, source_map, bit_depth, overwrite, quiet
+    image, mask, output, method, exemplar, context, seed, params, source_map, bit_depth, overwrite, quiet
 ):
     """Fill a hole of IMAGE with texture; the other pixels are kept exactly.
 
@@ -109,7 +115,8 @@ def fill_command(
     side_path = outputs.claim(sidecar_path(out_path), formats=JSON_FORMATS, what="sidecar")
 
     shape = planned_shape(image)
-    check_memory_before_reading(synthesizer, exemplar or image, shape[:2] if shape else None)
+    if context is None or exemplar is not None:  # with a context, fit checks the part it gets
+        check_memory_before_reading(synthesizer, exemplar or image, shape[:2] if shape else None)
     pixels = read_image(image, keep_alpha=mask is None)
     if mask is None:
         if pixels.ndim != 3 or pixels.shape[2] not in (2, 4):
@@ -124,7 +131,16 @@ def fill_command(
     seed, drawn = draw_seed(seed)
     bar = ProgressBar(f"fill {method}", enabled=not quiet)
     try:
-        result = fill(pixels, hole, method=method, exemplar=texture, rng=seed, callback=bar, **parameters)
+        result = fill(
+            pixels,
+            hole,
+            method=method,
+            exemplar=texture,
+            context=context,
+            rng=seed,
+            callback=bar,
+            **parameters,
+        )
     finally:
         bar.close()
     h, w = result.image.shape[:2]
@@ -135,7 +151,7 @@ def fill_command(
         method=method,
         params=synthesizer.get_params(),
         seed=seed,
-        options={"bit_depth": depth, "hole_pixels": int(hole.sum())},
+        options={"bit_depth": depth, "context": context, "hole_pixels": int(hole.sum())},
     )
     origin = pixels.shape if texture is None else texture.shape
     with outputs:

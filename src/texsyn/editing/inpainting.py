@@ -81,6 +81,7 @@ def fill(
     *,
     method: str = "efros_leung",
     exemplar: np.ndarray | None = None,
+    context: int | None = None,
     rng: None | int | np.random.Generator = None,
     callback: Callable[[Progress], None] | None = None,
     **params,
@@ -102,6 +103,10 @@ def fill(
     exemplar : ndarray, optional
         Texture to copy from; by default the known part of ``image`` (only the windows or
         blocks lying wholly in it are candidates). Needed when the whole image is a hole.
+    context : int, optional
+        Without an exemplar: copy only from the image within ``context`` pixels of the
+        hole's bounding box (less memory and time on a large photo); the whole image by
+        default.
     rng, callback
         As in :meth:`texsyn.TextureSynthesizer.sample`.
     **params
@@ -148,6 +153,8 @@ def fill(
         img = as_exemplar(pixels, name="image")
         hole = hole_mask(mask, img.shape[:2])
     known = ~hole
+    if context is not None and (int(context) != context or context < 1):
+        raise InputError(f"context must be a positive number of pixels, got {context!r}")
     generator = normalize_rng(rng)
     synthesizer: Any = make_method(method, **params)  # a method with ``fill`` (FILL_METHODS)
     if exemplar is not None:
@@ -168,11 +175,29 @@ def fill(
         )
         return SynthesisResult(img.astype(np.float32), source)
     if exemplar is None:
-        synthesizer.fit(np.where(known[..., None] if img.ndim == 3 else known, img, img[known].mean()))
-        result = synthesizer.fill(img, known, exemplar_mask=known, rng=generator, callback=callback)
-        source = np.where(known[..., None], _own_positions(img.shape[:2]), result.source_map)
-        return SynthesisResult(result.image, source.astype(np.int32), result.diagnostics)
+        return _fill_from_image(synthesizer, img, known, context, generator, callback)
     return synthesizer.fill(img, known, rng=generator, callback=callback)
+
+
+def _fill_from_image(synthesizer, img, known, context, rng, callback) -> SynthesisResult:
+    """Fill from the known pixels of the image within ``context`` pixels of the hole's box."""
+    height, width = known.shape
+    rows, cols = np.nonzero(~known)
+    if context is None:
+        top, bottom, left, right = 0, height, 0, width
+    else:
+        top, bottom = max(0, int(rows.min()) - context), min(height, int(rows.max()) + 1 + context)
+        left, right = max(0, int(cols.min()) - context), min(width, int(cols.max()) + 1 + context)
+    part, part_known = img[top:bottom, left:right], known[top:bottom, left:right]
+    kept = part_known[..., None] if part.ndim == 3 else part_known
+    synthesizer.fit(np.where(kept, part, part[part_known].mean()))
+    result = synthesizer.fill(part, part_known, exemplar_mask=part_known, rng=rng, callback=callback)
+    image = img.astype(np.float32)
+    image[top:bottom, left:right] = result.image
+    source = _own_positions(known.shape)
+    moved = result.source_map + np.array([top, left], dtype=np.int32)
+    source[top:bottom, left:right] = np.where(part_known[..., None], source[top:bottom, left:right], moved)
+    return SynthesisResult(image, source, result.diagnostics)
 
 
 def _own_positions(shape: tuple[int, int]) -> np.ndarray:
