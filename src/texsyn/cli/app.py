@@ -20,7 +20,8 @@ or none through :class:`texsyn.io.OutputSet`: nothing is created or replaced on 
 This module holds the ``texsyn`` group, the entry point and the mapping of every outcome to
 one line and an exit status; the commands are in :mod:`~texsyn.cli.synthesis`,
 :mod:`~texsyn.cli.modification`, :mod:`~texsyn.cli.animation`, :mod:`~texsyn.cli.editing`,
-:mod:`~texsyn.cli.comparison` and :mod:`~texsyn.cli.listing`, each imported when its command runs (:data:`COMMANDS`).
+:mod:`~texsyn.cli.comparison` and :mod:`~texsyn.cli.listing`, each imported when its command
+runs (:data:`COMMANDS`).
 """
 
 from __future__ import annotations

@@ -423,6 +423,8 @@ def grow_pixels(
     )
     values, filled, source = canvas.values, canvas.filled, canvas.source
     if guide is not None:
+        if not isinstance(sampler, NonParametricSampler) or not sampler.guide_channels:
+            raise ValueError("a guide needs a NonParametricSampler built with the exemplar's guide")
         canvas.guide_windows = np.lib.stride_tricks.sliding_window_view(
             np.pad(as_channels(np.asarray(guide, dtype=np.float64)), ((r, r), (r, r), (0, 0)), mode="edge"),
             (window, window),
