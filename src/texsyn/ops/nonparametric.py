@@ -12,6 +12,11 @@ of ``sigma = w / 6.4``, divided by the total weight. The candidates are every wi
 distance is at most ``(1 + tolerance)`` times the smallest; one is picked uniformly.
 :func:`schedule_batches` splits a pass of the growing loop into batches of pixels that do
 not interact, so that a batch can be searched with one matrix product.
+
+Why this module is long: the sampler keeps, beside the paper's search, the forms that
+editing needs (candidates restricted to the known part of an image, a guide term;
+``docs/editing.md``) next to the rule they share, and the two deprecated round-1 forms of
+the growing loop.
 """
 
 from __future__ import annotations
