@@ -86,6 +86,23 @@ __all__ = ["synth"]
     type=click.Path(dir_okay=False),
     help="Flow to synthesise along (grouplets): a .npy (H, W, 2) array of (row, col) vectors, or an image whose red and green channels map [0, 1] to row and column components in [-1, 1]. The output takes its size.",
 )
+@click.option(
+    "--guide-source",
+    type=click.Path(dir_okay=False),
+    help="Guide map of EXEMPLAR (an image of its size: labels as grey levels or colours); needs --guide-target (docs/editing.md).",
+)
+@click.option(
+    "--guide-target",
+    type=click.Path(dir_okay=False),
+    help="Guide map of the output (same kind of image); the output takes its size.",
+)
+@click.option(
+    "--guide-weight",
+    type=Number(0.0, 1e6),
+    default=1.0,
+    show_default=True,
+    help="Weight of the guides' mean squared difference against the overlap's.",
+)
 @overwrite_option()
 @quiet_option
 def synth(
@@ -101,6 +118,9 @@ def synth(
     exemplar_max_side,
     bit_depth,
     flow_file,
+    guide_source,
+    guide_target,
+    guide_weight,
     overwrite,
     quiet,
 ):
@@ -124,15 +144,23 @@ def synth(
             raise InputError(f"method {method!r} does not follow a flow; --flow needs method 'grouplets'")
         if size is not None or scale is not None:
             raise click.UsageError("--flow sets the output size; do not give --size or --scale")
+    guided = guide_source is not None or guide_target is not None
+    if guided:
+        check_guide_options(method, guide_source, guide_target, size, scale, flow_file)
     outputs = output_set(overwrite)
     outputs.add_input(input_path(exemplar), "exemplar")
     outputs.add_input(flow_file, "flow file")
+    outputs.add_input(guide_source, "source guide")
+    outputs.add_input(guide_target, "target guide")
     out_path = outputs.claim(output, bit_depth=depth)
     map_path = claim_extra(outputs, source_map, "source map")
     side_path = outputs.claim(sidecar_path(out_path), formats=JSON_FORMATS, what="sidecar")
 
     flow = read_flow(flow_file) if flow_file is not None else None
-    streaming = flow is None and synthesizer.streams_rows
+    guides = read_guides(guide_source, guide_target, exemplar_crop, exemplar_max_side) if guided else None
+    if guides is not None:
+        size = guides[1].shape[:2]
+    streaming = flow is None and guides is None and synthesizer.streams_rows
     preparation = {"crop": exemplar_crop, "max_side": exemplar_max_side}
     check_memory_before_reading(
         synthesizer,
@@ -144,6 +172,8 @@ def synth(
     )
     image, label = load_exemplar(exemplar)
     image = prepare_exemplar(image, **preparation)
+    if guides is not None:
+        check_guide_sizes(guides[0], image, guide_source, exemplar)
     if flow is not None:
         shape = flow.shape[:2]
     elif size is not None:
@@ -166,7 +196,12 @@ def synth(
         options["exemplar_max_side"] = exemplar_max_side
     sidecar_args = {
         "outputs": {"image": out_path, "source_map": map_path, "sidecar": side_path},
-        "inputs": {"exemplar": exemplar or f"{BUILTIN_PREFIX}brick", "flow": flow_file},
+        "inputs": {
+            "exemplar": exemplar or f"{BUILTIN_PREFIX}brick",
+            "flow": flow_file,
+            "guide_source": guide_source,
+            "guide_target": guide_target,
+        },
         "method": method,
         "seed": seed,
         "options": options,
@@ -181,7 +216,10 @@ def synth(
                     side_path, sidecar_json("synth", params=synthesizer.get_params(), **sidecar_args)
                 )
         else:
-            if flow is not None:
+            if guides is not None:
+                options["guide_weight"] = guide_weight
+                result = synthesizer.sample_guided(*guides, weight=guide_weight, rng=seed, callback=bar)
+            elif flow is not None:
                 result = SynthesisResult(synthesizer.synthesize_along(flow, rng=seed, callback=bar))
             else:
                 result = synthesizer.sample_with_map(shape, rng=seed, callback=bar)
@@ -218,3 +256,37 @@ def stream_bands(outputs, synthesizer, shape, seed, bar, exemplar_shape, out_pat
     image_rows.close()
     if map_rows is not None:
         map_rows.close()
+
+
+def check_guide_options(method, guide_source, guide_target, size, scale, flow_file) -> None:
+    """Refuse guide options that cannot work together, before any file is read."""
+    from ..editing import GUIDED_METHODS
+
+    if guide_source is None or guide_target is None:
+        raise click.UsageError("give both --guide-source and --guide-target")
+    if method not in GUIDED_METHODS:
+        raise InputError(
+            f"method {method!r} does not follow guide maps; methods that do: {', '.join(GUIDED_METHODS)}"
+        )
+    if size is not None or scale is not None or flow_file is not None:
+        raise click.UsageError("--guide-target sets the output size; do not give --size, --scale or --flow")
+
+
+def read_guides(guide_source, guide_target, crop, max_side) -> tuple[np.ndarray, np.ndarray]:
+    """The two guide maps, the exemplar's prepared as the exemplar is (crop, shrink)."""
+    from ..io import read_image
+
+    source = prepare_exemplar(read_image(guide_source), crop=crop, max_side=max_side)
+    target = read_image(guide_target)
+    if source.ndim != target.ndim:
+        raise InputError("the two guides must both be grey or both colour")
+    return source, target
+
+
+def check_guide_sizes(source, image, guide_source, exemplar) -> None:
+    """The exemplar's guide must have the exemplar's size (after --exemplar-crop/-max-side)."""
+    if source.shape[:2] != image.shape[:2]:
+        raise InputError(
+            f"guide '{guide_source}' is {source.shape[1]}x{source.shape[0]} pixels and the exemplar "
+            f"{exemplar or 'builtin:brick'} {image.shape[1]}x{image.shape[0]}; they must have the same size"
+        )
