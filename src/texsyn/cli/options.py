@@ -15,6 +15,7 @@ import re
 import click
 
 from .._validation import OneOf
+from ..data import BUILTIN_PREFIX
 from ..errors import InputError
 from ..methods import get_method
 
@@ -38,8 +39,6 @@ __all__ = [
 
 MAX_SIDE = 100_000
 """Largest output side in pixels accepted by ``--size`` and ``--scale`` (memory is checked too)."""
-
-BUILTIN_PREFIX = "builtin:"
 
 OVERWRITE_HELP = "Replace existing output files (an output that names an input is refused anyway)."
 
