@@ -11,6 +11,7 @@ the same manifest and outputs at once.
 from __future__ import annotations
 
 import json
+import math
 import os
 from pathlib import Path
 
@@ -82,7 +83,7 @@ class Manifest:
         """Add one record as one line, on disk (``fsync``) before returning."""
         if self._fd is None:
             raise RuntimeError("the manifest is not open for writing (use it as a context manager)")
-        line = (json.dumps(record, sort_keys=True, allow_nan=False) + "\n").encode("utf-8")
+        line = (json.dumps(_finite(record), sort_keys=True, allow_nan=False) + "\n").encode("utf-8")
         os.write(self._fd, line)
         os.fsync(self._fd)
 
@@ -108,6 +109,17 @@ class Manifest:
                 f"another texsyn batch is writing to '{self.outdir}'; wait for it or choose another output folder"
             ) from None
         self._lock_fd = fd
+
+
+def _finite(value):
+    """``value`` with NaN and infinite floats as ``None`` (strict JSON has no such numbers)."""
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
 
 
 def verified(item: BatchItem, record: dict | None) -> bool:

@@ -103,13 +103,20 @@ def connect(
 
 
 def dashboard_link(client) -> str | None:
-    """The address of the cluster's dashboard, or ``None`` when it has none."""
+    """The address of the cluster's dashboard, or ``None`` when it has none (no bokeh on the scheduler)."""
     try:
         if "dashboard" not in client.scheduler_info().get("services", {}):
+            return None
+        if not client.run_on_scheduler(_has_bokeh):
             return None
         return str(client.dashboard_link)
     except Exception:  # an address we cannot tell is not worth stopping the batch for
         return None
+
+
+def _has_bokeh() -> bool:
+    """Whether bokeh, which draws the dashboard's pages, is installed (run on the scheduler)."""
+    return importlib.util.find_spec("bokeh") is not None
 
 
 def run(
@@ -177,7 +184,8 @@ def run(
         previous = manifest.read()
         pending = []
         for item in items:
-            if verified(item, previous.get(item.id)):
+            record = previous.get(item.id)
+            if verified(item, record) and (not metrics or record.get("metrics")):  # type: ignore[union-attr]
                 records[item.id] = previous[item.id]
             else:
                 pending.append(item)

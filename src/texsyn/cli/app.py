@@ -74,6 +74,7 @@ COMMANDS = {
     "modify": "modify",
     "animate": "animate",
     "compare": "compare",
+    "batch": "batch",
     "methods": "list_methods",
 }
 
@@ -85,6 +86,7 @@ _command_function, _ = lazy_exports(
         "modify": "modification",
         "animate": "animation",
         "compare": "comparison",
+        "batch": "batch",
         "list_methods": "listing",
     },
 )
