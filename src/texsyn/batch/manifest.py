@@ -16,7 +16,7 @@ import os
 from pathlib import Path
 
 from ..errors import InputError
-from .plan import BatchItem, file_sha256
+from .items import BatchItem, file_sha256
 
 __all__ = ["MANIFEST_NAME", "Manifest", "verified"]
 

@@ -62,7 +62,8 @@ def batch_report(records: Sequence[dict], outdir: str | os.PathLike, *, metadata
     """
     methods = list(dict.fromkeys(r["method"] for r in records))
     exemplars = list(dict.fromkeys(r["exemplar"] for r in records))
-    data = {
+    blocks: list[dict] = []
+    data: dict = {
         "texsyn_batch_report": 1,
         "created": datetime.now(UTC).isoformat(timespec="seconds"),
         "versions": {
@@ -74,7 +75,7 @@ def batch_report(records: Sequence[dict], outdir: str | os.PathLike, *, metadata
         "outdir": str(outdir),
         "metrics": METRIC_DESCRIPTIONS,
         "summary": [_summary(m, [r for r in records if r["method"] == m]) for m in methods],
-        "exemplars": [],
+        "exemplars": blocks,
     }
     for exemplar in exemplars:
         rows = []
@@ -95,7 +96,7 @@ def batch_report(records: Sequence[dict], outdir: str | os.PathLike, *, metadata
                 for r in own
             ]
             rows.append(row)
-        data["exemplars"].append({"exemplar": exemplar, "methods": rows})
+        blocks.append({"exemplar": exemplar, "methods": rows})
     if metadata:
         data.update(metadata)
     return data

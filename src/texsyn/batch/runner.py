@@ -28,8 +28,8 @@ from ..errors import InputError
 from ..io import OutputSet
 from ..ops.linalg import worker_count
 from ..ops.progress import Progress
+from .items import BatchItem
 from .manifest import Manifest, verified
-from .plan import BatchItem
 from .tasks import ONE_THREAD_ENVIRONMENT, ExemplarBytes, describe_error, fit_task, item_task
 
 __all__ = ["BatchRecords", "connect", "run"]
@@ -70,7 +70,7 @@ def connect(
 
     The local cluster has ``workers`` processes (the CPUs by default) of one thread each, every
     thread library capped at one thread (:data:`~texsyn.batch.tasks.ONE_THREAD_ENVIRONMENT`),
-    and a dashboard on a free port when ``dashboard`` and bokeh is installed. What this
+    and its web server (the dashboard, when bokeh is installed) on a free port. What this
     function starts it also stops.
     """
     if client is not None:
@@ -87,13 +87,12 @@ def connect(
         except OSError as exc:
             raise InputError(f"cannot reach the Dask scheduler at '{scheduler}': {exc}") from exc
         return
-    show = dashboard and importlib.util.find_spec("bokeh") is not None
     with (
         LocalCluster(
             n_workers=workers or worker_count(),
             threads_per_worker=1,
             processes=True,
-            dashboard_address=":0" if show else None,
+            dashboard_address=":0" if dashboard else None,  # a free port (8787 may be another cluster's)
             silence_logs=logging.ERROR,
             env=dict(ONE_THREAD_ENVIRONMENT),
         ) as cluster,
@@ -194,9 +193,6 @@ def run(
         report = _reporter(callback, total)
         report(len(records))
         if pending:
-            if not send_bytes:
-                for item in pending:
-                    item.output_path.parent.mkdir(parents=True, exist_ok=True)
             with connect(client, scheduler=scheduler, workers=workers) as dask_client:
                 if on_connect is not None:
                     on_connect(dask_client)
@@ -294,7 +290,12 @@ def _write_received(item: BatchItem, record: dict, overwrite: bool) -> dict:
         outputs = OutputSet(overwrite=True)
         outputs.claim(path)
         with outputs:
-            outputs.write(path, lambda tmp: tmp.write_bytes(data))
+            outputs.write(path, lambda tmp: _write_bytes(tmp, data))
     except Exception as exc:
         record.update(status="failed", sha256=None, error=describe_error(exc))
     return record
+
+
+def _write_bytes(path, data: bytes) -> None:
+    with open(path, "wb") as f:
+        f.write(data)

@@ -21,7 +21,6 @@ import socket
 import sys
 import tempfile
 import time
-import tracemalloc
 from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -35,7 +34,7 @@ from ..io import OutputSet, read_image
 from ..methods import TextureSynthesizer, make_method
 from ..ops.canvas import default_output_shape, prepare_exemplar
 from ..ops.linalg import THREADS_VARIABLE
-from .plan import BatchItem, file_sha256
+from .items import BatchItem, file_sha256
 from .synthesis import load_exemplar, write_texture
 
 __all__ = [
@@ -48,6 +47,8 @@ __all__ = [
     "fit_task",
     "item_task",
     "one_thread",
+    "peak_memory",
+    "reset_peak_memory",
 ]
 
 #: the environment of a worker process that runs one thread (set by the local cluster before it starts)
@@ -101,6 +102,41 @@ def one_thread():
         numba.set_num_threads(1)
     with threadpool_limits(limits=1):
         yield
+
+
+def reset_peak_memory() -> bool:
+    """Start a new peak of this process's resident memory (Linux: ``/proc/self/clear_refs``).
+
+    Returns whether it could; if not, :func:`peak_memory` is the peak since the process started.
+    """
+    try:
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")
+        return True
+    except OSError:
+        return False
+
+
+def peak_memory() -> int:
+    """The peak resident memory of this process in bytes, since :func:`reset_peak_memory`.
+
+    Measured by the system (``VmHWM``), so it counts everything the item used (NumPy, numba,
+    the encoders) at no cost to the item, and the process's own baseline (the interpreter, the
+    fitted model) as well.
+    """
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        import resource
+    except ImportError:  # pragma: no cover - Windows: not measured
+        return 0
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return int(peak if sys.platform == "darwin" else peak * 1024)  # bytes on macOS, KiB elsewhere
 
 
 def describe_error(exc: BaseException) -> str:
@@ -163,16 +199,15 @@ def item_task(
         "worker": f"{socket.gethostname()}:{os.getpid()}",
     }
     start = time.perf_counter()
-    tracing = not tracemalloc.is_tracing()
-    if tracing:
-        tracemalloc.start()
-    tracemalloc.reset_peak()
+    record["peak_memory_scope"] = "item" if reset_peak_memory() else "process"
     try:
         if isinstance(fitted, FitFailure):
             raise FitError(fitted.error)
         record["fit_seconds"] = fitted.seconds
         with one_thread(), tempfile.TemporaryDirectory(prefix="texsyn-batch-") as scratch:
             target = item.output_path
+            if not send_bytes:  # the exemplar's folder, made by the first of its items that succeeds this far
+                target.parent.mkdir(parents=True, exist_ok=True)
             if send_bytes:
                 target = Path(scratch) / Path(item.output).name
             elif target.exists() and not overwrite:  # made beside it, then compared
@@ -197,10 +232,7 @@ def item_task(
         record.update(status="failed", sha256=None, error=f"fit failed: {exc}")
     except Exception as exc:
         record.update(status="failed", sha256=None, error=describe_error(exc))
-    finally:
-        record["peak_memory_bytes"] = int(tracemalloc.get_traced_memory()[1])
-        if tracing:
-            tracemalloc.stop()
+    record["peak_memory_bytes"] = peak_memory()
     record["seconds"] = time.perf_counter() - start
     record["finished"] = datetime.now(UTC).isoformat(timespec="seconds")
     return record
@@ -214,12 +246,12 @@ def _make(item: BatchItem, fitted: FittedModel, target: Path) -> tuple[int, int]
     """Sample the item and write it to ``target`` (all or nothing); the output's (height, width)."""
     synthesizer = fitted.synthesizer
     exemplar = fitted.exemplar
-    shape = tuple(item.size) if item.size is not None else default_output_shape(exemplar.shape)
+    shape = item.size if item.size is not None else default_output_shape(exemplar.shape)
     synthesizer.check_memory_for(exemplar.shape, shape, streaming=synthesizer.streams_rows)
     outputs = OutputSet(overwrite=True)
     path = outputs.claim(target)
-    write_texture(outputs, synthesizer, shape, item.seed, path, exemplar.shape)  # type: ignore[arg-type]
-    return shape  # type: ignore[return-value]
+    write_texture(outputs, synthesizer, shape, item.seed, path, exemplar.shape)
+    return shape
 
 
 def _measure(path: Path, exemplar: np.ndarray) -> dict[str, float]:

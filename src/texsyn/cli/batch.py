@@ -93,8 +93,8 @@ def parse_seed_list(texts: tuple[str, ...]) -> list[int] | None:
             if not part:
                 continue
             try:
-                seeds.append(SEED.convert(part, None, None))
-            except click.BadParameter:
+                seeds.append(SEED.convert(int(part), None, None))
+            except (ValueError, click.BadParameter):
                 raise click.UsageError(
                     f"--seed-list takes integers in [0, 2^64 - 1] separated by commas, got {text!r}"
                 ) from None

@@ -280,6 +280,7 @@ def plan(
     for exemplar in exemplars:
         digest = exemplar_sha256(exemplar)
         for method in methods:
+            chosen: list[tuple[int, int, int | None]]
             if seed_list is not None:
                 chosen = [(k, s, None) for k, s in enumerate(explicit)]
             else:
