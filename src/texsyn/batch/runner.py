@@ -64,7 +64,6 @@ def connect(
     *,
     scheduler: str | None = None,
     workers: int | None = None,
-    dashboard: bool = True,
 ) -> Iterator[Any]:
     """A Dask client: ``client`` itself, one connected to ``scheduler``, or a new local cluster's.
 
@@ -92,7 +91,7 @@ def connect(
             n_workers=workers or worker_count(),
             threads_per_worker=1,
             processes=True,
-            dashboard_address=":0" if dashboard else None,  # a free port (8787 may be another cluster's)
+            dashboard_address=":0",  # a free port: 8787 may be another cluster's
             silence_logs=logging.ERROR,
             env=dict(ONE_THREAD_ENVIRONMENT),
         ) as cluster,

@@ -21,7 +21,7 @@ import socket
 import sys
 import tempfile
 import time
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -204,14 +204,16 @@ def item_task(
         if isinstance(fitted, FitFailure):
             raise FitError(fitted.error)
         record["fit_seconds"] = fitted.seconds
-        with one_thread(), tempfile.TemporaryDirectory(prefix="texsyn-batch-") as scratch:
+        with one_thread(), ExitStack() as stack:
             target = item.output_path
-            if not send_bytes:  # the exemplar's folder, made by the first of its items that succeeds this far
+            if send_bytes:  # made in a scratch folder of the worker, sent back as bytes
+                scratch = stack.enter_context(tempfile.TemporaryDirectory(prefix="texsyn-batch-"))
+                target = Path(scratch) / target.name
+            else:  # the exemplar's folder, made by the first of its items that gets this far
                 target.parent.mkdir(parents=True, exist_ok=True)
-            if send_bytes:
-                target = Path(scratch) / Path(item.output).name
-            elif target.exists() and not overwrite:  # made beside it, then compared
-                target = target.parent / f".{target.name}.{os.getpid()}.check.png"
+                if target.exists() and not overwrite:  # made beside it, then compared
+                    target = target.parent / f".{target.name}.{os.getpid()}.check.png"
+                    stack.callback(target.unlink, missing_ok=True)
             shape = _make(item, fitted, target)
             digest = file_sha256(target)
             record["size"] = [shape[1], shape[0]]
@@ -220,7 +222,6 @@ def item_task(
             if send_bytes:
                 record["data"] = target.read_bytes()
             elif target != item.output_path:  # the output existed: kept only if it is this item's
-                target.unlink()
                 if file_sha256(item.output_path) != digest:
                     raise InputError(
                         f"output '{item.output_path}' exists and is not what this item makes; "
