@@ -63,7 +63,20 @@ class Manifest:
     def __enter__(self) -> Manifest:
         self.outdir.mkdir(parents=True, exist_ok=True)
         self._lock()
-        try:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def append(self, record: dict) -> None:
+        """Add one record as one line, on disk (``fsync``) before returning.
+
+        The file is opened (made if missing) at the first record, so a batch that makes
+        nothing leaves none.
+        """
+        if self._lock_fd is None:
+            raise RuntimeError("the manifest is not open for writing (use it as a context manager)")
+        if self._fd is None:
             self._fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o666)
             size = os.fstat(self._fd).st_size
             if size:
@@ -71,20 +84,10 @@ class Manifest:
                     f.seek(size - 1)
                     if f.read(1) != b"\n":  # a last line cut short: end it, so the next record parses
                         os.write(self._fd, b"\n")
-        except BaseException:
-            self.close()
-            raise
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
-
-    def append(self, record: dict) -> None:
-        """Add one record as one line, on disk (``fsync``) before returning."""
-        if self._fd is None:
-            raise RuntimeError("the manifest is not open for writing (use it as a context manager)")
         line = (json.dumps(_finite(record), sort_keys=True, allow_nan=False) + "\n").encode("utf-8")
-        os.write(self._fd, line)
+        written = 0
+        while written < len(line):  # a regular file takes it in one write, barring a full disk
+            written += os.write(self._fd, line[written:])
         os.fsync(self._fd)
 
     def close(self) -> None:
@@ -96,11 +99,12 @@ class Manifest:
             self._lock_fd = None
 
     def _lock(self) -> None:
+        fd = os.open(self.outdir / LOCK_NAME, os.O_WRONLY | os.O_CREAT, 0o666)
         try:
             import fcntl
-        except ImportError:  # pragma: no cover - not POSIX: no lock
+        except ImportError:  # pragma: no cover - not POSIX: the file is held open, not locked
+            self._lock_fd = fd
             return
-        fd = os.open(self.outdir / LOCK_NAME, os.O_WRONLY | os.O_CREAT, 0o666)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
