@@ -123,8 +123,8 @@ def render_batch_html(data: dict, page: str | os.PathLike) -> str:
         )
         failed = f' class="failed" title="{esc("; ".join(entry["errors"]))}"' if entry["failed"] else ""
         return (
-            f"<tr{failed}><td>{esc(entry['method'])}</td><td>{entry['done']}</td><td>{entry['failed']}</td>"
-            f"<td>{'-' if seconds is None else f'{seconds:.3f}'}</td>{cells}{extra}</tr>"
+            f"<tr{failed}><td>{esc(entry['method'])}</td>{extra}<td>{entry['done']}</td><td>{entry['failed']}</td>"
+            f"<td>{'-' if seconds is None else f'{seconds:.3f}'}</td>{cells}</tr>"
         )
 
     def thumbnails(entry: dict) -> str:
@@ -140,12 +140,12 @@ def render_batch_html(data: dict, page: str | os.PathLike) -> str:
             )
         return f'<td class="outputs">{" ".join(links)}</td>'
 
-    table_head = f"<tr><th>method</th><th>done</th><th>failed</th><th>time (s)</th>{head}"
+    columns = f"<th>done</th><th>failed</th><th>time (s)</th>{head}</tr>"
     sections = []
     for block in data["exemplars"]:
         rows = "\n".join(row(entry, thumbnails(entry)) for entry in block["methods"])
         sections.append(
-            f"<section><h2>{esc(block['exemplar'])}</h2>\n<table>\n{table_head}<th>outputs</th></tr>\n"
+            f"<section><h2>{esc(block['exemplar'])}</h2>\n<table>\n<tr><th>method</th><th>outputs</th>{columns}\n"
             f"{rows}\n</table></section>"
         )
     legend = "".join(
@@ -156,7 +156,7 @@ def render_batch_html(data: dict, page: str | os.PathLike) -> str:
         title=esc(f"texsyn batch comparison: {len(data['exemplars'])} exemplars"),
         created=esc(data["created"]),
         summary="\n".join(row(entry) for entry in data["summary"]),
-        head=table_head + "</tr>",
+        head="<tr><th>method</th>" + columns,
         legend=legend,
         sections="\n".join(sections),
         versions=esc(versions),
@@ -174,14 +174,17 @@ table {{ border-collapse: collapse; margin: 1em 0; }}
 th, td {{ border: 1px solid #ccc; padding: 0.3em 0.6em; text-align: right; }}
 th:first-child, td:first-child, td.outputs {{ text-align: left; }}
 tr.failed td {{ color: #a00; }}
+td.outputs {{ white-space: nowrap; }}
 td.outputs img {{ image-rendering: pixelated; border: 1px solid #ddd; margin: 1px; }}
 .error {{ color: #a00; }}
 </style>
 </head>
 <body>
 <h1>{title}</h1>
-<p>Made {created}. Mean metrics over every exemplar and seed of each method; the outputs
-are files of the batch's folder, linked from here.</p>
+<p>Made {created}. Time: median seconds of an item (sampling and writing; the fit each
+exemplar and method share is not counted). Metrics: means over every exemplar and seed of
+each method, measured on the files as written. The outputs are files of the batch's folder,
+linked from here.</p>
 <h2>Summary</h2>
 <table>
 {head}

@@ -217,8 +217,11 @@ def item_task(
             shape = _make(item, fitted, target)
             digest = file_sha256(target)
             record["size"] = [shape[1], shape[0]]
+            record["seconds"] = time.perf_counter() - start
             if metrics:
+                measuring = time.perf_counter()
                 record["metrics"] = _measure(target, fitted.exemplar)
+                record["metrics_seconds"] = time.perf_counter() - measuring
             if send_bytes:
                 record["data"] = target.read_bytes()
             elif target != item.output_path:  # the output existed: kept only if it is this item's
@@ -234,7 +237,7 @@ def item_task(
     except Exception as exc:
         record.update(status="failed", sha256=None, error=describe_error(exc))
     record["peak_memory_bytes"] = peak_memory()
-    record["seconds"] = time.perf_counter() - start
+    record.setdefault("seconds", time.perf_counter() - start)
     record["finished"] = datetime.now(UTC).isoformat(timespec="seconds")
     return record
 
