@@ -14,6 +14,8 @@ rest of that file):
   of one thread each. The cluster is started and warmed up first (one batch of the same
   methods in another folder: worker imports and numba's cache loads are not counted); the
   time is the batch's wall time, fits included, median of ``--repeats`` runs in new folders.
+  The local cluster leaves out Dask's ``MALLOC_TRIM_THRESHOLD_`` (``docs/batch.md``); the
+  cost of that setting is measured too, on the serial run.
   The same 32 jobs one after the other in this process, without Dask, give the serial
   baselines: with the process's threads, and with one thread as a worker has.
 * The scheduler's overhead per task: 500 trivial tasks (``client.submit`` of a function that
@@ -26,7 +28,10 @@ rest of that file):
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -93,7 +98,22 @@ def serial(inputs: Path, root: Path) -> float:
     return time.perf_counter() - start
 
 
+def serial_process(inputs: Path, root: Path, trim: bool) -> float:
+    """:func:`serial` with one thread in a new process, with or without Dask's ``MALLOC_TRIM_THRESHOLD_``."""
+    env = {k: v for k, v in os.environ.items() if k != "MALLOC_TRIM_THRESHOLD_"}
+    if trim:
+        env["MALLOC_TRIM_THRESHOLD_"] = "65536"
+    args = [sys.executable, __file__, "--child-serial", str(inputs), str(root)]
+    return float(subprocess.run(args, env=env, capture_output=True, text=True, check=True).stdout.split()[-1])
+
+
 def main() -> None:
+    if len(sys.argv) == 4 and sys.argv[1] == "--child-serial":
+        inputs, root = Path(sys.argv[2]), Path(sys.argv[3])
+        serial(inputs, root / "warm")
+        with one_thread():
+            print(min(serial(inputs, root / f"r{k}") for k in range(2)))
+        return
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results.md")
@@ -103,7 +123,10 @@ def main() -> None:
         inputs = exemplars(root / "in", 64)
         tiny = exemplars(root / "tiny", 8)
         serial(inputs, root / "warm")  # imports and numba's cache in this process
+        threads = worker_count()
         base = serial(inputs, root / "threads")
+        plain = serial_process(inputs, root / "plain", trim=False)
+        trimmed = serial_process(inputs, root / "trim", trim=True)
         with one_thread():
             alone = serial(inputs, root / "one")
         walls = {}
@@ -151,8 +174,11 @@ def main() -> None:
         "",
         "| run | cluster start (s) | 32 jobs (s) | per job (s) | speed-up over 1 worker |",
         "|---|---:|---:|---:|---:|",
-        f"| serial, in process, no Dask, {worker_count()} threads | | {base:.2f} | {base / 32:.3f} | |",
+        f"| serial, in process, no Dask, {threads} threads | | {base:.2f} | {base / 32:.3f} | |",
         f"| serial, in process, no Dask, 1 thread | | {alone:.2f} | {alone / 32:.3f} | |",
+        f"| serial, new process, 1 thread | | {plain:.2f} | {plain / 32:.3f} | |",
+        f"| serial, new process, 1 thread, `MALLOC_TRIM_THRESHOLD_=65536` | | {trimmed:.2f} | "
+        f"{trimmed / 32:.3f} | |",
         f"| 1 worker | {walls[1][0]:.2f} | {walls[1][1]:.2f} | {walls[1][1] / 32:.3f} | 1.00 |",
         f"| 2 workers | {walls[2][0]:.2f} | {walls[2][1]:.2f} | {walls[2][1] / 32:.3f} | {speedup:.2f} |",
         "",

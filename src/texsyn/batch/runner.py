@@ -34,6 +34,9 @@ from .tasks import ONE_THREAD_ENVIRONMENT, ExemplarBytes, describe_error, fit_ta
 
 __all__ = ["BatchRecords", "connect", "run"]
 
+#: the Dask setting that puts ``MALLOC_TRIM_THRESHOLD_`` in a nanny's workers (``None`` leaves it out)
+TRIM_SETTING = "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_"
+
 #: how many times Dask runs a task again after it raised (a worker that dies is handled apart)
 DEFAULT_RETRIES = 2
 
@@ -86,17 +89,21 @@ def connect(
         except OSError as exc:
             raise InputError(f"cannot reach the Dask scheduler at '{scheduler}': {exc}") from exc
         return
-    with (
-        LocalCluster(
+    import dask
+
+    # Dask's nanny sets MALLOC_TRIM_THRESHOLD_=65536 in its workers, which hands every freed
+    # array back to the system and makes texsyn's syntheses about 25 % slower
+    # (benchmarks/results.md, "Batch runs on Dask"): glibc's own policy is kept instead
+    with dask.config.set({TRIM_SETTING: None}):
+        cluster = LocalCluster(
             n_workers=workers or worker_count(),
             threads_per_worker=1,
             processes=True,
             dashboard_address=":0",  # a free port: 8787 may be another cluster's
             silence_logs=logging.ERROR,
             env=dict(ONE_THREAD_ENVIRONMENT),
-        ) as cluster,
-        Client(cluster) as local,
-    ):
+        )
+    with cluster, Client(cluster) as local:
         yield local
 
 
