@@ -23,6 +23,7 @@ import pytest
 import texsyn
 from texsyn.cli import main
 from texsyn.io import write_image
+from texsyn.metrics import METRIC_DESCRIPTIONS
 
 distributed = pytest.importorskip("distributed")
 
@@ -316,6 +317,7 @@ def test_compare_over_a_folder(cluster, exemplars, tmp_path, capsys):
             for run in m["runs"]
         ]
         assert summary["done"] == 4 and [r["seed"] for r in runs] == [0, 1, 0, 1]
+        assert set(summary["mean_metrics"]) == set(METRIC_DESCRIPTIONS)
         for name, mean in summary["mean_metrics"].items():
             assert mean == pytest.approx(np.mean([r["metrics"][name] for r in runs]))
     page = report.read_text()
