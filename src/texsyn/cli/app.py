@@ -77,6 +77,7 @@ COMMANDS = {
     "fill": "fill_command",
     "transfer": "transfer_command",
     "compare": "compare",
+    "batch": "batch",
     "serve": "serve",
     "methods": "list_methods",
 }
@@ -91,6 +92,7 @@ _command_function, _ = lazy_exports(
         "fill_command": "editing",
         "transfer_command": "editing",
         "compare": "comparison",
+        "batch": "batch",
         "serve": "serving",
         "list_methods": "listing",
     },

@@ -10,8 +10,8 @@ sidecar all or none. ``modify`` and ``animate`` are in :mod:`~texsyn.cli.modific
 from __future__ import annotations
 
 import click
-import numpy as np
 
+from ..batch.synthesis import stream_bands
 from ..errors import InputError
 from ..io import sidecar_path
 from ..io.writing import JSON_FORMATS
@@ -45,7 +45,7 @@ from .options import (
 )
 from .progress import ProgressBar
 
-__all__ = ["synth"]
+__all__ = ["stream_bands", "synth"]
 
 
 @click.command()
@@ -237,25 +237,6 @@ def synth(
     finally:
         bar.close()
     done(quiet, seed, drawn, f"wrote {out_path} ({w}x{h}, {method}, from {label}) and {side_path}")
-
-
-def stream_bands(outputs, synthesizer, shape, seed, bar, exemplar_shape, out_path, map_path, depth) -> None:
-    """Write the bands of :meth:`~texsyn.methods.TextureSynthesizer.sample_rows` to the image
-    and source map files as they come: the float output is never held whole."""
-    channels = () if len(exemplar_shape) == 2 else (exemplar_shape[2],)
-    image_rows = outputs.open_rows(out_path, tuple(shape) + channels, bit_depth=depth)
-    map_rows = None
-    if map_path is not None:
-        npy = map_path.suffix.lower() == ".npy"
-        map_rows = outputs.open_rows(map_path, tuple(shape) + ((2,) if npy else (3,)), dtype=np.int32)
-    for band in synthesizer.sample_rows(shape, rng=seed, callback=bar):
-        image_rows.write(band.image)
-        if map_rows is not None:
-            source = band.source_map
-            map_rows.write(source if npy else position_colors(source, exemplar_shape[:2]))
-    image_rows.close()
-    if map_rows is not None:
-        map_rows.close()
 
 
 def check_guide_options(method, guide_source, guide_target, size, scale, flow_file) -> None:
