@@ -371,7 +371,11 @@ def test_the_queue_cancel_and_the_time_limit(tmp_path):
 
 
 def test_unknown_routes_answer_with_the_one_line_error_too(client):
-    for path in ("/api/nothing", "/api/exemplars/..%2F..%2Fetc%2Fpasswd/preview", "/static/../pyproject.toml"):
+    for path in (
+        "/api/nothing",
+        "/api/exemplars/..%2F..%2Fetc%2Fpasswd/preview",
+        "/static/../pyproject.toml",
+    ):
         response = client.get(path)
         assert response.status_code == 404 and set(response.json()) == {"error"}
     assert set(client.put("/api/jobs").json()) == {"error"}
@@ -397,7 +401,11 @@ def test_a_failed_measuring_step_leaves_the_output_with_a_warning(tmp_path):
 
     exemplar = Exemplar("builtin:brick", "builtin:brick", "builtin:brick", tmp_path / "p.png", 8, 8, 1)
     make = [sys.executable, "-c", "open('texture.png', 'wb').write(b'png')"]
-    fail = [sys.executable, "-c", "import sys; sys.stderr.write('texsyn: error: no memory left\\n'); sys.exit(1)"]
+    fail = [
+        sys.executable,
+        "-c",
+        "import sys; sys.stderr.write('texsyn: error: no memory left\\n'); sys.exit(1)",
+    ]
     plan = JobPlan("synth", "x", exemplar, [make, fail], "texsyn synth ...", 1, {}, optional_from=1)
     plan.files = {"image": DownloadFile("texture.png", "t.png", "image/png")}
 

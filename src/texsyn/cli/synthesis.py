@@ -10,6 +10,7 @@ sidecar all or none. ``modify`` and ``animate`` are in :mod:`~texsyn.cli.modific
 from __future__ import annotations
 
 import click
+import numpy as np
 
 from ..batch.synthesis import stream_bands
 from ..errors import InputError
