@@ -249,6 +249,19 @@ def test_the_event_stream_reports_progress_until_the_job_ends(client):
     assert set(client.get(f"/api/jobs/{job['id']}").json()["files"]) == {"image", "run"}  # not measured
 
 
+def test_a_tileable_job_passes_the_option_on(client):
+    request = {
+        "exemplar": "builtin:brick",
+        "method": "quilting",
+        "size": [64, 64],
+        "seed": 4,
+        "metrics": False,
+    }
+    job = wait_for(client, client.post("/api/jobs", json={**request, "tileable": True}).json()["id"])
+    assert job["state"] == "done" and "--seed 4 --tileable --source-map" in job["command_line"]
+    assert client.get(job["files"]["run"]["url"]).json()["options"]["tileable"] is True
+
+
 @pytest.mark.parametrize(
     "request_body, words",
     [
@@ -271,6 +284,7 @@ def test_the_event_stream_reports_progress_until_the_job_ends(client):
         ({"exemplar": 12}, "exemplar must be"),
         ({"exemplar": "builtin:brick", "output": "/etc/passwd"}, "unknown field"),
         ({"exemplar": "builtin:brick", "metrics": "yes"}, "metrics must be true or false"),
+        ({"exemplar": "builtin:brick", "tileable": 1}, "tileable must be true or false"),
         ({"mode": "compare", "exemplar": "builtin:brick", "methods": []}, "methods must be a list"),
         ({"mode": "animate", "exemplar": "builtin:brick", "frames": 10**6}, "frames must be in"),
         ([1, 2, 3], "must be a JSON object"),

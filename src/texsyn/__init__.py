@@ -67,6 +67,8 @@ def synthesize(
     method: str = "quilting",
     shape: tuple[int, int] | None = None,
     rng: None | int | np.random.Generator = None,
+    *,
+    tileable: bool = False,
     **params,
 ) -> np.ndarray:
     """Synthesise a texture from an exemplar in one call (construct, fit, sample).
@@ -81,6 +83,8 @@ def synthesize(
         Output ``(height, width)``; twice the exemplar by default.
     rng : None, int or numpy.random.Generator
         The same value gives the same texture.
+    tileable : bool
+        Make the output wrap seamlessly in both directions (``docs/tiling.md``).
     **params
         Hyperparameters of the method.
 
@@ -97,7 +101,7 @@ def synthesize(
     >>> bool((texture == synthesize(exemplar, "random_phase", shape=(48, 64), rng=0)).all())
     True
     """
-    return make_method(method, **params).fit(exemplar).sample(shape, rng=rng)
+    return make_method(method, **params).fit(exemplar).sample(shape, rng=rng, tileable=tileable)
 
 
 def modify(

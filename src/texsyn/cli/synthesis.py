@@ -104,6 +104,11 @@ __all__ = ["stream_bands", "synth"]
     show_default=True,
     help="Weight of the guides' mean squared difference against the overlap's.",
 )
+@click.option(
+    "--tileable",
+    is_flag=True,
+    help="Make the output wrap seamlessly in both directions (docs/tiling.md).",
+)
 @overwrite_option()
 @quiet_option
 def synth(
@@ -122,6 +127,7 @@ def synth(
     guide_source,
     guide_target,
     guide_weight,
+    tileable,
     overwrite,
     quiet,
 ):
@@ -146,6 +152,8 @@ def synth(
         if size is not None or scale is not None:
             raise click.UsageError("--flow sets the output size; do not give --size or --scale")
     guided = guide_source is not None or guide_target is not None
+    if tileable and (flow_file is not None or guided):
+        raise click.UsageError("--tileable applies to a plain synthesis, not with --flow or guides")
     if guided:
         check_guide_options(method, guide_source, guide_target, size, scale, flow_file)
     outputs = output_set(overwrite)
@@ -161,7 +169,7 @@ def synth(
     guides = read_guides(guide_source, guide_target, exemplar_crop, exemplar_max_side) if guided else None
     if guides is not None:
         size = guides[1].shape[:2]
-    streaming = flow is None and guides is None and synthesizer.streams_rows
+    streaming = flow is None and guides is None and not tileable and synthesizer.streams_rows
     preparation = {"crop": exemplar_crop, "max_side": exemplar_max_side}
     check_memory_before_reading(
         synthesizer,
@@ -195,6 +203,8 @@ def synth(
         options["exemplar_crop"] = [exemplar_crop[1], exemplar_crop[0]]
     if exemplar_max_side is not None:
         options["exemplar_max_side"] = exemplar_max_side
+    if tileable:
+        options["tileable"] = True
     sidecar_args = {
         "outputs": {"image": out_path, "source_map": map_path, "sidecar": side_path},
         "inputs": {
@@ -223,7 +233,7 @@ def synth(
             elif flow is not None:
                 result = SynthesisResult(synthesizer.synthesize_along(flow, rng=seed, callback=bar))
             else:
-                result = synthesizer.sample_with_map(shape, rng=seed, callback=bar)
+                result = synthesizer.sample_with_map(shape, rng=seed, callback=bar, tileable=tileable)
             h, w = result.image.shape[:2]
             options["size"] = [w, h]
             sidecar = sidecar_json(

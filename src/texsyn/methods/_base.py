@@ -398,6 +398,7 @@ class TextureSynthesizer:
         *,
         rng: None | int | np.random.Generator = None,
         callback: Callable[[Progress], None] | None = None,
+        tileable: bool = False,
     ) -> np.ndarray:
         """Draw one texture.
 
@@ -410,6 +411,9 @@ class TextureSynthesizer:
             Source of randomness; the same value gives the same texture.
         callback : callable, optional
             Called with :class:`Progress` records while the method works.
+        tileable : bool
+            Make the output wrap seamlessly in both directions (:attr:`tiling` says how;
+            ``docs/materials.md``, "Tileable outputs").
 
         Returns
         -------
@@ -431,7 +435,7 @@ class TextureSynthesizer:
         >>> bool((model.sample((64, 80), rng=1) == texture).all())  # the fitted model is unchanged
         True
         """
-        return self.sample_with_map(shape, rng=rng, callback=callback).image
+        return self.sample_with_map(shape, rng=rng, callback=callback, tileable=tileable).image
 
     @fixed_order
     def sample_with_map(
@@ -440,6 +444,7 @@ class TextureSynthesizer:
         *,
         rng: None | int | np.random.Generator = None,
         callback: Callable[[Progress], None] | None = None,
+        tileable: bool = False,
     ) -> SynthesisResult:
         """Like :meth:`sample`, but also return the source map of copy-based methods."""
         ex = self._require_fitted()
@@ -449,6 +454,10 @@ class TextureSynthesizer:
         sampled = self._sample(out_shape, generator, callback)
         image, source = sampled[0], sampled[1]
         diagnostics = sampled[2] if len(sampled) > 2 else None
+        if tileable and not self.periodic_for(out_shape):  # a quilted seam band (methods._tiling)
+            from ._tiling import quilted_seam_band
+
+            image, source = quilted_seam_band(self._as_output(image), source, ex, generator)
         result = self._as_output(image)
         if source is not None:
             source = np.asarray(source, dtype=np.int32)
@@ -517,6 +526,16 @@ class TextureSynthesizer:
     ) -> Iterator[tuple[np.ndarray, np.ndarray | None]]:
         """The method's synthesis as ``(rows, source_rows)`` bands, top to bottom (:attr:`streams_rows`)."""
         raise NotImplementedError  # pragma: no cover - only methods that stream define it
+
+    def periodic_for(self, shape: tuple[int, int]) -> bool:
+        """Whether an output of ``shape`` wraps around by construction.
+
+        ``tileable=True`` then samples as usual; otherwise a band across each wrap of the
+        output is quilted again from the exemplar (:func:`texsyn.methods._tiling.quilted_seam_band`;
+        ``docs/tiling.md``).
+        The spectral methods whose working canvas is the output itself say so.
+        """
+        return False
 
     def _as_output(self, image: np.ndarray) -> np.ndarray:
         """An image as methods return it: the exemplar's rank, float32 clipped to [0, 1]."""

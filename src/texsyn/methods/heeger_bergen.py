@@ -121,6 +121,10 @@ class HeegerBergen(TextureSynthesizer):
         """The working canvas: the output, at least ``2^n_scales`` pixels per side."""
         return padded_canvas(shape, minimum=2**self.n_scales)
 
+    def periodic_for(self, shape):
+        """The pyramid is periodic (FFT) on its canvas: the output, when it is large enough."""
+        return self._canvas(shape) == tuple(shape)
+
     def _fit(self, exemplar: np.ndarray) -> None:
         self.colour_space_: ColourSpace = colour_space("pca", exemplar)
         coords = self.colour_space_.forward(exemplar)

@@ -229,6 +229,10 @@ class PatchWavelet(TextureSynthesizer):
                     coefficients.details[(level, axis)] = sigmas[level - 1] * rng.standard_normal(size)
         return coefficients
 
+    def periodic_for(self, shape):
+        """The inverse transform is periodic on its N x N map: the output, when it is one."""
+        return power_of_two_canvas(shape, minimum=4, square=True) == tuple(shape)
+
     def _sample(self, shape, rng, callback):
         transform: PatchWaveletTransform = self.transform_
         side = power_of_two_canvas(shape, minimum=4, square=True)[0]  # an N x N map, N >= 4

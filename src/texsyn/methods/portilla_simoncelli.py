@@ -353,6 +353,10 @@ class PortillaSimoncelli(TextureSynthesizer):
         """The working canvas: the output, at least ``2^(n_scales + 1)`` pixels per side."""
         return padded_canvas(shape, minimum=2 ** (self.n_scales + 1))
 
+    def periodic_for(self, shape):
+        """The pyramid is periodic (FFT) on its canvas: the output, when it is large enough."""
+        return self._canvas(shape) == tuple(shape)
+
     def _run(self, initial: np.ndarray, iterations: int, callback) -> tuple[np.ndarray, dict | None]:
         """The projections from ``initial``; with ``record_distance``, the distance per iteration."""
         pyramid = ComplexSteerablePyramid(initial.shape[1:], self.n_scales, self.n_orientations, single=True)

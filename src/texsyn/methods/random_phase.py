@@ -112,6 +112,10 @@ class RandomPhase(TextureSynthesizer):
         self.mean_ = base.mean(axis=(0, 1))
         self.spot_ = base - self.mean_
 
+    def periodic_for(self, shape):
+        """The noise is periodic on its canvas: the output, when it is at least the exemplar."""
+        return padded_canvas(shape, minimum=self.spot_.shape[:2]) == tuple(shape)
+
     def _sample(self, shape, rng, callback):
         canvas = padded_canvas(shape, minimum=self.spot_.shape[:2])  # at least the spot (section 4.2)
         out = crop_to_output(random_phase_noise(self.spot_, canvas, rng), shape)

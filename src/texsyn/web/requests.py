@@ -152,7 +152,19 @@ def plan_job(request, exemplar_of, settings: ServerSettings) -> JobPlan:
     """
     if not isinstance(request, dict):
         raise _fail("the request must be a JSON object")
-    known = {"mode", "exemplar", "method", "methods", "params", "size", "seed", "frames", "fps", "metrics"}
+    known = {
+        "mode",
+        "exemplar",
+        "method",
+        "methods",
+        "params",
+        "size",
+        "seed",
+        "frames",
+        "fps",
+        "metrics",
+        "tileable",
+    }
     unknown = sorted(str(key) for key in request if key not in known)
     if unknown:
         raise _fail(f"unknown field {_show(unknown[0])}; allowed: {', '.join(sorted(known))}")
@@ -230,8 +242,13 @@ def plan_job(request, exemplar_of, settings: ServerSettings) -> JobPlan:
     measured = request.get("metrics", True)
     if not isinstance(measured, bool):
         raise _fail(f"metrics must be true or false, got {_show(measured)}")
+    tileable = request.get("tileable", False)
+    if not isinstance(tileable, bool):
+        raise _fail(f"tileable must be true or false, got {_show(tileable)}")
     items = _params(method, request.get("params"))
     args = ["-m", method, *size_args, "--seed", str(seed), *[a for item in items for a in ("-p", item)]]
+    if tileable:
+        args.append("--tileable")
     has_map = get_method(method).has_source_map
     stem = f"texsyn-{method}-{seed}"
     map_args = ["--source-map", "source_map.npy"] if has_map else []

@@ -142,6 +142,7 @@ function request() {
     body.method = q("method").value;
     body.params = changedParams(body.method);
     body.metrics = q("measure").checked;
+    if (q("tileable").checked) body.tileable = true;
   } else if (state.mode === "compare") {
     body.methods = checkedMethods();
     body.params = {};
