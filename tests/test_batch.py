@@ -141,6 +141,11 @@ def test_outputs_do_not_depend_on_the_number_of_workers(killed_run, exemplars, t
     one = batch.run(alone, workers=1)
     by_output = {r["output"]: r for r in records}
     assert len(one) == len(records)
+    # one fit per (exemplar, method), shared by its items: they record the same fit time
+    fits: dict[str, set] = {}
+    for item, record in zip(alone, one):
+        fits.setdefault(item.fit_key, set()).add(record["fit_seconds"])
+    assert len(fits) == 6 * 2 and all(len(seconds) == 1 for seconds in fits.values())
     for record in one:
         assert record["sha256"] == by_output[record["output"]]["sha256"]
         assert record["seed"] == by_output[record["output"]]["seed"]
@@ -383,3 +388,46 @@ def test_ctrl_c_stops_cleanly_and_the_rerun_finishes(exemplars, tmp_path):
     assert done.returncode == 0, done.stderr
     assert len(manifest.read_text().splitlines()) == 24
     assert len(list(out.rglob("*.png"))) == 24
+
+
+def test_a_pattern_over_the_output_folder_does_not_take_the_outputs_for_exemplars(exemplars, tmp_path):
+    write_image(tmp_path / "brick.png", texsyn.data.exemplar("brick", size=32))
+    made = tmp_path / "out" / "brick" / "random_phase-s1.png"  # what an earlier run left
+    made.parent.mkdir(parents=True)
+    made.write_bytes((tmp_path / "brick.png").read_bytes())
+    items = batch.plan([str(tmp_path / "**" / "*.png")], tmp_path / "out", ["random_phase"])
+    assert [i.exemplar for i in items] == [str(tmp_path / "brick.png")]
+    # the output folder may be the input folder itself: its own images are exemplars
+    alone = batch.plan([str(exemplars)], exemplars, ["random_phase"])
+    assert len(alone) == 6
+
+
+def test_compare_batch_overwrite_replaces_the_outputs_of_other_parameters(
+    cluster, exemplars, tmp_path, capsys
+):
+    args = ["compare", "--batch", str(exemplars / "grass.png"), "-o", str(tmp_path / "r.html"), "-q"]
+    args += ["-m", "random_phase", "--scheduler", cluster.scheduler.address]
+    assert main([*args, "--size", "16x16"]) == 0
+    assert main([*args, "--size", "20x16"]) == 2  # the report exists
+    assert main([*args, "--size", "20x16", "--overwrite"]) == 0, capsys.readouterr().err
+    data = json.loads((tmp_path / "r.json").read_text())
+    assert [s["done"] for s in data["summary"]] == [1]
+
+
+def test_a_scheduler_address_that_is_not_one_is_one_line(tmp_path, capsys):
+    args = ["batch", "builtin:brick", "-o", str(tmp_path / "out"), "-m", "random_phase", "-q"]
+    assert main([*args, "--scheduler", "not-an-address"]) == 2
+    line = capsys.readouterr().err
+    assert line.startswith("texsyn: error: cannot reach the Dask scheduler") and line.count("\n") == 1
+
+
+def test_an_error_of_the_batch_on_a_scheduler_is_not_taken_for_the_connection(
+    cluster, exemplars, tmp_path, monkeypatch
+):
+    def full_disk(self, record):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(Manifest, "append", full_disk)
+    items = batch.plan([str(exemplars / "brick.png")], tmp_path, ["random_phase"], size=(16, 16))
+    with pytest.raises(OSError, match="No space left"):
+        batch.run(items, scheduler=cluster.scheduler.address)

@@ -152,16 +152,22 @@ def exemplar_sha256(exemplar: str) -> str:
     return file_sha256(exemplar)
 
 
-def expand_inputs(inputs: Iterable[str]) -> list[str]:
+def expand_inputs(inputs: Iterable[str], *, exclude: str | os.PathLike | None = None) -> list[str]:
     """The exemplars that ``inputs`` name, in the order given, each once.
 
     An input is a file, a folder (its image files, sorted by name, not its subfolders), a
     glob pattern (``*``, ``?``, ``[...]``; ``**`` crosses folders; matches sorted) or
     ``builtin:NAME``. A folder or pattern that names no image file, or a missing file, is
-    an error.
+    an error. Folders and patterns skip the files inside ``exclude`` (the batch's output
+    folder, so that a rerun does not take the outputs of the last run for exemplars).
     """
     found: list[str] = []
     seen: set[str] = set()
+    excluded = os.path.realpath(exclude) if exclude is not None else None
+
+    def outside(path: str) -> bool:  # outputs are in the output folder's subfolders, never in it
+        real = os.path.realpath(path)
+        return excluded is None or not os.path.dirname(real).startswith(excluded + os.sep)
 
     def add(path: str) -> None:
         key = path if path.startswith(BUILTIN_PREFIX) else os.path.realpath(path)
@@ -177,7 +183,9 @@ def expand_inputs(inputs: Iterable[str]) -> list[str]:
             add(given)
         elif os.path.isdir(given):
             images = sorted(
-                str(p) for p in Path(given).iterdir() if p.is_file() and p.suffix.lower() in READ_FORMATS
+                str(p)
+                for p in Path(given).iterdir()
+                if p.is_file() and p.suffix.lower() in READ_FORMATS and outside(str(p))
             )
             if not images:
                 raise InputError(f"folder '{given}' holds no image file ({', '.join(READ_FORMATS)})")
@@ -189,7 +197,7 @@ def expand_inputs(inputs: Iterable[str]) -> list[str]:
             matches = sorted(
                 p
                 for p in glob.glob(given, recursive=True)
-                if os.path.isfile(p) and Path(p).suffix.lower() in READ_FORMATS
+                if os.path.isfile(p) and Path(p).suffix.lower() in READ_FORMATS and outside(p)
             )
             if not matches:
                 raise InputError(f"pattern '{given}' matches no image file")
@@ -267,7 +275,7 @@ def plan(
         explicit = list(dict.fromkeys(explicit))
     elif seeds < 1:
         raise InputError(f"seeds must be at least 1, got {seeds}")
-    exemplars = expand_inputs(inputs)
+    exemplars = expand_inputs(inputs, exclude=outdir)
     stems: dict[str, str] = {}
     for exemplar in exemplars:
         other = stems.setdefault(stem(exemplar), exemplar)

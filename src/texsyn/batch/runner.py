@@ -84,10 +84,12 @@ def connect(
         raise InputError('texsyn batch needs Dask: pip install "texsyn[batch]"') from exc
     if scheduler is not None:
         try:
-            with Client(scheduler, timeout="10s") as remote:
-                yield remote
-        except OSError as exc:
-            raise InputError(f"cannot reach the Dask scheduler at '{scheduler}': {exc}") from exc
+            remote = Client(scheduler, timeout="10s")
+        except Exception as exc:  # no answer, a malformed address, a service that is not Dask
+            message = " ".join(str(exc).split()) or type(exc).__name__
+            raise InputError(f"cannot reach the Dask scheduler at '{scheduler}': {message}") from exc
+        with remote:  # errors of the batch itself are not the connection's
+            yield remote
         return
     import dask
 

@@ -57,7 +57,9 @@ __all__ = ["compare"]
     help="With --batch: the folder of the outputs and their manifest [default: REPORT_files beside the report].",
 )
 @cluster_options
-@overwrite_option("Replace an existing report and its sidecar.")
+@overwrite_option(
+    "Replace an existing report and its sidecar (with --batch, also outputs that are not what their item makes)."
+)
 @quiet_option
 def compare(
     exemplars,
@@ -161,6 +163,7 @@ def compare_batch(
         scheduler=scheduler,
         workers=workers,
         send_bytes=send_bytes,
+        overwrite=overwrite,
         metrics=True,
     )
     metadata = {"command_line": command_line(), "report": str(html_path)}
