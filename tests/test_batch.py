@@ -431,3 +431,14 @@ def test_an_error_of_the_batch_on_a_scheduler_is_not_taken_for_the_connection(
     items = batch.plan([str(exemplars / "brick.png")], tmp_path, ["random_phase"], size=(16, 16))
     with pytest.raises(OSError, match="No space left"):
         batch.run(items, scheduler=cluster.scheduler.address)
+
+
+def test_an_output_that_would_replace_an_input_is_refused(tmp_path):
+    """A previous output given back as an input, with the seed that made it: the batch would
+    write over its own exemplar (found by the issue-22 review)."""
+    folder = tmp_path / "out" / "quilting-s3"
+    folder.mkdir(parents=True)
+    exemplar = folder / "quilting-s3.png"
+    write_image(exemplar, texsyn.data.exemplar("brick", size=32))
+    with pytest.raises(texsyn.errors.InputError, match="would replace the input"):
+        batch.plan([str(exemplar)], tmp_path / "out", ["quilting"], seed_list=[3])

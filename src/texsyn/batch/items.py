@@ -311,4 +311,12 @@ def plan(
                         batch_seed=derived_from,
                     )
                 )
+    inputs_by_path = {os.path.realpath(e): e for e in exemplars if not e.startswith(BUILTIN_PREFIX)}
+    for item in items:  # an output never replaces an input (docs/batch.md, "Safety")
+        target = os.path.realpath(os.path.join(item.outdir, item.output))
+        if target in inputs_by_path:
+            raise InputError(
+                f"the output '{target}' of {item.method} (seed {item.seed}) would replace the input "
+                f"'{inputs_by_path[target]}'; write the batch to another folder (-o)"
+            )
     return items
