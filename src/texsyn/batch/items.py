@@ -312,7 +312,7 @@ def plan(
                     )
                 )
     inputs_by_path = {os.path.realpath(e): e for e in exemplars if not e.startswith(BUILTIN_PREFIX)}
-    for item in items:  # an output never replaces an input (docs/batch.md, "Safety")
+    for item in items:  # an output never replaces an input (docs/batch.md, "The manifest, and reruns")
         target = os.path.realpath(os.path.join(item.outdir, item.output))
         if target in inputs_by_path:
             raise InputError(
