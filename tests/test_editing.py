@@ -301,3 +301,47 @@ def test_fill_within_a_context(method, params):
     assert src[:, 0].max() < 62 + 16 and src[:, 1].max() < 74 + 16
     assert not hole[src[:, 0], src[:, 1]].any()
     assert hole_error(result.image, truth, hole) < 0.05 * min(baselines(truth, hole))
+
+
+def test_transfer_command_runs_the_method_it_names(tmp_path, capsys):
+    """``texsyn transfer -m efros_leung`` grows pixels (it ran quilting, and said efros_leung)."""
+    aim = transfer_target((16, 20))
+    write_image(tmp_path / "target.png", aim)
+    texture = texsyn.data.exemplar("brick", size=32)
+    write_image(tmp_path / "texture.png", texture)
+    out = tmp_path / "out.png"
+    base = ["transfer", str(tmp_path / "texture.png"), str(tmp_path / "target.png"), "--seed", "0", "-q"]
+    code = main([*base, "-m", "efros_leung", "-p", "window_size=5", "--alpha", "0.3", "-o", str(out)])
+    assert code == 0
+    direct = transfer(
+        read_image(tmp_path / "texture.png"),
+        read_image(tmp_path / "target.png"),
+        method="efros_leung",
+        alpha=0.3,
+        window_size=5,
+        rng=0,
+    )
+    assert np.array_equal(read_image(out), read_image_of(direct.image, tmp_path))
+    capsys.readouterr()
+    bad = tmp_path / "bad.png"
+    code = main([*base, "-m", "efros_leung", "--iterations", "2", "-o", str(bad)])
+    assert code == 2 and "one pass" in capsys.readouterr().err and not bad.exists()
+
+
+def read_image_of(image, folder):
+    """``image`` as the command line writes it (8-bit PNG) and reads it back."""
+    write_image(folder / "direct.png", image)
+    return read_image(folder / "direct.png")
+
+
+def test_transfer_refuses_a_target_map_of_another_size():
+    texture = texsyn.data.exemplar("gravel", size=32)
+    target = transfer_target((24, 28))
+    for method, params in (
+        ("quilting", {"patch_size": 8, "iterations": 1}),
+        ("efros_leung", {"window_size": 5}),
+    ):
+        with pytest.raises(InputError, match="target"):
+            transfer(
+                texture, target, method=method, texture_map=texture, target_map=target[:20, :20], **params
+            )
