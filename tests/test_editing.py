@@ -268,6 +268,10 @@ def test_guided_synth_command(tmp_path, capsys):
     assert code == 2 and "guide" in capsys.readouterr().err
     code = main([*base, "--guide-target", str(tmp_path / "gs.png"), "--size", "40x40", "-o", str(out), "-q"])
     assert code == 2
+    capsys.readouterr()
+    plain = ["synth", str(tmp_path / "ex.png"), "--guide-weight", "5", "-o", str(tmp_path / "w.png"), "-q"]
+    assert main(plain) == 2 and "--guide-weight" in capsys.readouterr().err  # it was silently ignored
+    assert not (tmp_path / "w.png").exists()
 
 
 # ---------------------------------------------------------------------------- efros_leung

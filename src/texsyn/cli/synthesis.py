@@ -99,9 +99,7 @@ __all__ = ["synth"]
 @click.option(
     "--guide-weight",
     type=Number(0.0, 1e6),
-    default=1.0,
-    show_default=True,
-    help="Weight of the guides' mean squared difference against the overlap's.",
+    help="Weight of the guides' mean squared difference against the overlap's [default: 1].",
 )
 @overwrite_option()
 @quiet_option
@@ -147,6 +145,9 @@ def synth(
     guided = guide_source is not None or guide_target is not None
     if guided:
         check_guide_options(method, guide_source, guide_target, size, scale, flow_file)
+    elif guide_weight is not None:
+        raise click.UsageError("--guide-weight needs --guide-source and --guide-target")
+    guide_weight = 1.0 if guide_weight is None else guide_weight
     outputs = output_set(overwrite)
     outputs.add_input(input_path(exemplar), "exemplar")
     outputs.add_input(flow_file, "flow file")
