@@ -112,8 +112,8 @@ def transfer(
     aim = as_exemplar(target, name="target")
     if texture_map is None:
         texture_map, target_map = correspondence_map(tex, blur), correspondence_map(aim, blur)
-    elif np.shape(target_map)[:2] != aim.shape[:2]:
-        shape = np.shape(target_map)
+    elif np.asarray(target_map).shape[:2] != aim.shape[:2]:
+        shape = np.asarray(target_map).shape
         raise InputError(
             f"the target's map is {shape[1] if len(shape) > 1 else '?'}x{shape[0]} pixels; it must have "
             f"the target's size, {aim.shape[1]}x{aim.shape[0]}"
