@@ -280,6 +280,7 @@ def transfer_command(
         result = transfer(
             tex,
             aim,
+            method=method,
             alpha=alpha,
             iterations=iterations,
             blur=blur,

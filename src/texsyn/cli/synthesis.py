@@ -100,9 +100,7 @@ __all__ = ["stream_bands", "synth"]
 @click.option(
     "--guide-weight",
     type=Number(0.0, 1e6),
-    default=1.0,
-    show_default=True,
-    help="Weight of the guides' mean squared difference against the overlap's.",
+    help="Weight of the guides' mean squared difference against the overlap's [default: 1].",
 )
 @click.option(
     "--tileable",
@@ -156,6 +154,9 @@ def synth(
         raise click.UsageError("--tileable applies to a plain synthesis, not with --flow or guides")
     if guided:
         check_guide_options(method, guide_source, guide_target, size, scale, flow_file)
+    elif guide_weight is not None:
+        raise click.UsageError("--guide-weight needs --guide-source and --guide-target")
+    guide_weight = 1.0 if guide_weight is None else guide_weight
     outputs = output_set(overwrite)
     outputs.add_input(input_path(exemplar), "exemplar")
     outputs.add_input(flow_file, "flow file")

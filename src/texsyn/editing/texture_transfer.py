@@ -112,6 +112,12 @@ def transfer(
     aim = as_exemplar(target, name="target")
     if texture_map is None:
         texture_map, target_map = correspondence_map(tex, blur), correspondence_map(aim, blur)
+    elif np.asarray(target_map).shape[:2] != aim.shape[:2]:
+        shape = np.asarray(target_map).shape
+        raise InputError(
+            f"the target's map is {shape[1] if len(shape) > 1 else '?'}x{shape[0]} pixels; it must have "
+            f"the target's size, {aim.shape[1]}x{aim.shape[0]}"
+        )
     if method == "efros_leung":
         if iterations != 1:
             raise InputError("efros_leung transfers in one pass; give iterations=1 (--iterations 1)")
