@@ -137,7 +137,10 @@ def test_fill_command(tmp_path, capsys):
     # bad inputs: one line, exit 2, no file
     write_image(tmp_path / "small.png", hole[:-3])
     write_image(tmp_path / "grey.png", 0.5 * hole + 0.25)
+    # the hole drawn in a mask's alpha only (its colour black): refused, not read as no hole
+    write_image(tmp_path / "alpha.png", np.stack([np.zeros_like(hole)] * 3 + [1.0 - hole], axis=-1))
     for bad, message in [
+        (["--mask", str(tmp_path / "alpha.png")], "transparent pixels"),
         (["--mask", str(tmp_path / "small.png")], "same size"),
         (["--mask", str(tmp_path / "grey.png")], "not black and white"),
         (["--mask", str(tmp_path / "mask.png"), "-m", "cwt"], "cannot fill holes"),

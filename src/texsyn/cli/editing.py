@@ -62,7 +62,8 @@ def _position_picture(shape: tuple[int, ...]):
 @click.option(
     "--mask",
     type=click.Path(dir_okay=False),
-    help="Black and white image of IMAGE's size: white marks the pixels to fill [default: the transparent pixels of IMAGE].",
+    help="Black and white image of IMAGE's size: white (above 0.5) marks the pixels to fill; at most 2 %% "
+    "of it may be grey between 0.1 and 0.9 (anti-aliased edges) [default: the transparent pixels of IMAGE].",
 )
 @output_option("Output image (.png, .jpg, .tif).")
 @click.option(
@@ -126,7 +127,15 @@ def fill_command(
         if pixels.shape[2] == 1:
             pixels = pixels[..., 0]
     else:
-        hole = hole_mask(read_image(mask), pixels.shape[:2], name=f"mask '{mask}'")
+        mask_pixels = read_image(mask, keep_alpha=True)
+        if mask_pixels.ndim == 3 and mask_pixels.shape[2] in (2, 4) and (mask_pixels[..., -1] < 1).any():
+            raise InputError(
+                f"mask '{mask}' has transparent pixels, which a mask does not use: paint the hole white "
+                "on black and save it opaque (or leave out --mask to fill the transparent pixels of IMAGE)"
+            )
+        if mask_pixels.ndim == 3 and mask_pixels.shape[2] in (2, 4):
+            mask_pixels = mask_pixels[..., :-1]
+        hole = hole_mask(mask_pixels, pixels.shape[:2], name=f"mask '{mask}'")
     texture, label = (None, "the image") if exemplar is None else load_exemplar(exemplar)
     seed, drawn = draw_seed(seed)
     bar = ProgressBar(f"fill {method}", enabled=not quiet)
