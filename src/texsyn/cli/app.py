@@ -71,6 +71,7 @@ class Terminated(BaseException):
 #: each command and the name of its function, in the order ``texsyn --help`` lists them
 COMMANDS = {
     "synth": "synth",
+    "replay": "replay_command",
     "modify": "modify",
     "animate": "animate",
     "compare": "compare",
@@ -83,6 +84,7 @@ _command_function, _ = lazy_exports(
     __package__ or "",
     {
         "synth": "synthesis",
+        "replay_command": "replaying",
         "modify": "modification",
         "animate": "animation",
         "compare": "comparison",

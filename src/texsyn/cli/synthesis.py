@@ -9,6 +9,8 @@ sidecar all or none. ``modify`` and ``animate`` are in :mod:`~texsyn.cli.modific
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import click
 import numpy as np
 
@@ -17,25 +19,33 @@ from ..io import sidecar_path
 from ..io.writing import JSON_FORMATS
 from ..methods import METHODS, SynthesisResult, get_method, make_method
 from ..ops import position_colors
-from ..ops.canvas import default_output_shape, prepare_exemplar
+from ..ops.canvas import default_output_shape
+from ..ops.materials import LayerEncoding
 from .common import (
     check_memory_before_reading,
     claim_extra,
     done,
     draw_seed,
     input_path,
-    load_exemplar,
     output_set,
     read_flow,
     sidecar_json,
     stage_extra,
+)
+from .materials import (
+    depth_name,
+    plan_exemplar,
+    read_exemplar,
+    resolve_depth,
+    synth_bit_depth_option,
+    synth_material,
+    to_stored,
 )
 from .options import (
     BUILTIN_PREFIX,
     MAX_SIDE,
     SIZE,
     Number,
-    bit_depth_option,
     output_option,
     overwrite_option,
     param_option,
@@ -50,7 +60,7 @@ __all__ = ["synth"]
 
 @click.command()
 @click.argument("exemplar", required=False)
-@output_option("Output image (.png, .jpg, .tif).")
+@output_option("Output image (.png, .jpg, .tif, .npy, .exr), or a folder with --with.")
 @click.option(
     "-m", "--method", default="quilting", show_default=True, help="Synthesis method (see `texsyn methods`)."
 )
@@ -79,7 +89,28 @@ __all__ = ["synth"]
     metavar="N",
     help="Shrink EXEMPLAR (after --exemplar-crop) so that its longer side is at most N pixels.",
 )
-@bit_depth_option
+@synth_bit_depth_option
+@click.option(
+    "--linear",
+    is_flag=True,
+    help="Synthesise the colour in linear light: sRGB-decoded before, encoded after [default: the stored values].",
+)
+@click.option(
+    "--with",
+    "with_images",
+    multiple=True,
+    type=click.Path(dir_okay=False),
+    metavar="IMAGE",
+    help="Another image of the material (normal, height, roughness...), carried in register; -o is then a folder (repeatable; docs/materials.md).",
+)
+@click.option(
+    "--with-normal",
+    "with_normals",
+    multiple=True,
+    type=click.Path(dir_okay=False),
+    metavar="IMAGE",
+    help="A normal map of the material, renormalised to unit length (repeatable; --with takes names with 'normal' as normal maps too).",
+)
 @click.option(
     "--flow",
     "flow_file",
@@ -100,6 +131,9 @@ def synth(
     exemplar_crop,
     exemplar_max_side,
     bit_depth,
+    linear,
+    with_images,
+    with_normals,
     flow_file,
     overwrite,
     quiet,
@@ -107,11 +141,11 @@ def synth(
     """Synthesise a texture from EXEMPLAR (an image file, or builtin:brick|grass|gravel).
 
     Without EXEMPLAR, the built-in brick texture is used. Also writes OUTPUT.json.
+    With --with images (a material), OUTPUT is a folder receiving one file per image.
     """
     if size is not None and scale is not None:
         raise click.UsageError("give either --size or --scale, not both")
     cls = get_method(method)
-    depth = int(bit_depth)
     parameters = parse_params(method, params)
     synthesizer = make_method(method, **parameters)
     if source_map is not None and not cls.has_source_map:
@@ -124,6 +158,31 @@ def synth(
             raise InputError(f"method {method!r} does not follow a flow; --flow needs method 'grouplets'")
         if size is not None or scale is not None:
             raise click.UsageError("--flow sets the output size; do not give --size or --scale")
+    preparation = {"crop": exemplar_crop, "max_side": exemplar_max_side}
+    plan = plan_exemplar(exemplar)
+    if with_images or with_normals or plan.channels in (2, 4):  # a material (docs/materials.md)
+        if flow_file is not None:
+            raise click.UsageError("--flow synthesises one image; it takes no --with images or alpha channel")
+        synth_material(
+            exemplar=exemplar,
+            output=output,
+            method=method,
+            synthesizer=synthesizer,
+            parameters=parameters,
+            size=size,
+            scale=scale,
+            seed=seed,
+            source_map=source_map,
+            preparation=preparation,
+            bit_depth=bit_depth,
+            linear=linear,
+            with_images=with_images,
+            with_normals=with_normals,
+            overwrite=overwrite,
+            quiet=quiet,
+        )
+        return
+    depth = resolve_depth(bit_depth, plan.depth, Path(output))
     outputs = output_set(overwrite)
     outputs.add_input(input_path(exemplar), "exemplar")
     outputs.add_input(flow_file, "flow file")
@@ -133,7 +192,6 @@ def synth(
 
     flow = read_flow(flow_file) if flow_file is not None else None
     streaming = flow is None and synthesizer.streams_rows
-    preparation = {"crop": exemplar_crop, "max_side": exemplar_max_side}
     check_memory_before_reading(
         synthesizer,
         exemplar,
@@ -142,8 +200,9 @@ def synth(
         streaming=streaming,
         preparation=preparation,
     )
-    image, label = load_exemplar(exemplar)
-    image = prepare_exemplar(image, **preparation)
+    found, label = read_exemplar(exemplar, preparation)
+    encoding = LayerEncoding.of(found.pixels, linear=linear)
+    image = found.pixels if encoding.is_identity else encoding.to_unit(found.pixels)
     if flow is not None:
         shape = flow.shape[:2]
     elif size is not None:
@@ -159,7 +218,9 @@ def synth(
         shape = default_output_shape(image.shape)
     seed, drawn = draw_seed(seed)
     h, w = shape
-    options = {"size": [w, h], "bit_depth": depth}
+    options = {"size": [w, h], "bit_depth": depth_name(depth), "linear": linear}
+    if encoding.low != 0.0 or encoding.high != 1.0:
+        options["value_range"] = [encoding.low, encoding.high]
     if exemplar_crop is not None:
         options["exemplar_crop"] = [exemplar_crop[1], exemplar_crop[0]]
     if exemplar_max_side is not None:
@@ -176,7 +237,19 @@ def synth(
         synthesizer.fit(image)
         if streaming:  # rows go to the files as the method finishes them (docs/performance.md)
             with outputs:
-                stream_bands(outputs, synthesizer, shape, seed, bar, image.shape, out_path, map_path, depth)
+                stream_bands(
+                    outputs,
+                    synthesizer,
+                    shape,
+                    seed,
+                    bar,
+                    image.shape,
+                    out_path,
+                    map_path,
+                    depth,
+                    store=lambda rows: to_stored(rows, encoding, depth),
+                    icc_profile=found.icc_profile,
+                )
                 outputs.write_text(
                     side_path, sidecar_json("synth", params=synthesizer.get_params(), **sidecar_args)
                 )
@@ -191,7 +264,12 @@ def synth(
                 "synth", params=synthesizer.get_params(), diagnostics=result.diagnostics, **sidecar_args
             )
             with outputs:
-                outputs.write_image(out_path, result.image, bit_depth=depth)
+                outputs.write_image(
+                    out_path,
+                    to_stored(result.image, encoding, depth),
+                    bit_depth=depth,
+                    icc_profile=found.icc_profile,
+                )
                 stage_extra(
                     outputs, map_path, result.source_map, lambda m: position_colors(m, image.shape[:2])
                 )
@@ -201,17 +279,33 @@ def synth(
     done(quiet, seed, drawn, f"wrote {out_path} ({w}x{h}, {method}, from {label}) and {side_path}")
 
 
-def stream_bands(outputs, synthesizer, shape, seed, bar, exemplar_shape, out_path, map_path, depth) -> None:
+def stream_bands(
+    outputs,
+    synthesizer,
+    shape,
+    seed,
+    bar,
+    exemplar_shape,
+    out_path,
+    map_path,
+    depth,
+    *,
+    store=None,
+    icc_profile: bytes | None = None,
+) -> None:
     """Write the bands of :meth:`~texsyn.methods.TextureSynthesizer.sample_rows` to the image
-    and source map files as they come: the float output is never held whole."""
+    and source map files as they come: the float output is never held whole. ``store``
+    turns a band into the values the file keeps (:func:`~texsyn.cli.materials.to_stored`)."""
     channels = () if len(exemplar_shape) == 2 else (exemplar_shape[2],)
-    image_rows = outputs.open_rows(out_path, tuple(shape) + channels, bit_depth=depth)
+    image_rows = outputs.open_rows(
+        out_path, tuple(shape) + channels, bit_depth=depth, icc_profile=icc_profile
+    )
     map_rows = None
     if map_path is not None:
         npy = map_path.suffix.lower() == ".npy"
         map_rows = outputs.open_rows(map_path, tuple(shape) + ((2,) if npy else (3,)), dtype=np.int32)
     for band in synthesizer.sample_rows(shape, rng=seed, callback=bar):
-        image_rows.write(band.image)
+        image_rows.write(band.image if store is None else store(band.image))
         if map_rows is not None:
             source = band.source_map
             map_rows.write(source if npy else position_colors(source, exemplar_shape[:2]))
