@@ -44,6 +44,7 @@ __all__ = [
     "BIT_DEPTHS",
     "ExemplarPlan",
     "claim_stack_outputs",
+    "claimed_depth",
     "Layer",
     "depth_name",
     "output_folder",
@@ -102,6 +103,14 @@ def resolve_depth(choice: str, input_depth: int, path: Path, what: str = "output
     if input_depth in allowed:
         return input_depth
     return max(d for d in allowed if d <= max(input_depth, min(allowed))) if allowed else 8
+
+
+def claimed_depth(choice: str, output: str) -> int:
+    """The depth an output is claimed with before the exemplar's header is read: the choice,
+    or with ``auto`` one its format holds (:func:`resolve_depth` decides once it is read)."""
+    if choice != "auto":
+        return 32 if choice == "32f" else int(choice)
+    return WRITE_FORMATS.get(Path(output).suffix.lower(), (8,))[0]
 
 
 def _header_depth(bits: int) -> int:

@@ -9,8 +9,6 @@ sidecar all or none. ``modify`` and ``animate`` are in :mod:`~texsyn.cli.modific
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import click
 import numpy as np
 
@@ -33,6 +31,7 @@ from .common import (
     stage_extra,
 )
 from .materials import (
+    claimed_depth,
     depth_name,
     plan_exemplar,
     read_exemplar,
@@ -159,36 +158,42 @@ def synth(
         if size is not None or scale is not None:
             raise click.UsageError("--flow sets the output size; do not give --size or --scale")
     preparation = {"crop": exemplar_crop, "max_side": exemplar_max_side}
-    plan = plan_exemplar(exemplar)
-    if with_images or with_normals or plan.channels in (2, 4):  # a material (docs/materials.md)
+    material = {
+        "exemplar": exemplar,
+        "output": output,
+        "method": method,
+        "synthesizer": synthesizer,
+        "parameters": parameters,
+        "size": size,
+        "scale": scale,
+        "seed": seed,
+        "source_map": source_map,
+        "preparation": preparation,
+        "bit_depth": bit_depth,
+        "linear": linear,
+        "with_images": with_images,
+        "with_normals": with_normals,
+        "overwrite": overwrite,
+        "quiet": quiet,
+    }
+    if with_images or with_normals:  # a material: -o is a folder (docs/materials.md)
         if flow_file is not None:
-            raise click.UsageError("--flow synthesises one image; it takes no --with images or alpha channel")
-        synth_material(
-            exemplar=exemplar,
-            output=output,
-            method=method,
-            synthesizer=synthesizer,
-            parameters=parameters,
-            size=size,
-            scale=scale,
-            seed=seed,
-            source_map=source_map,
-            preparation=preparation,
-            bit_depth=bit_depth,
-            linear=linear,
-            with_images=with_images,
-            with_normals=with_normals,
-            overwrite=overwrite,
-            quiet=quiet,
-        )
+            raise click.UsageError("--flow synthesises one image; it takes no --with images")
+        synth_material(**material)
         return
-    depth = resolve_depth(bit_depth, plan.depth, Path(output))
     outputs = output_set(overwrite)
     outputs.add_input(input_path(exemplar), "exemplar")
     outputs.add_input(flow_file, "flow file")
-    out_path = outputs.claim(output, bit_depth=depth)
+    out_path = outputs.claim(output, bit_depth=claimed_depth(bit_depth, output))
     map_path = claim_extra(outputs, source_map, "source map")
     side_path = outputs.claim(sidecar_path(out_path), formats=JSON_FORMATS, what="sidecar")
+    plan = plan_exemplar(exemplar)
+    if plan.channels in (2, 4):  # alpha is carried like a material's image
+        if flow_file is not None:
+            raise click.UsageError("--flow synthesises one image; its exemplar has no alpha channel")
+        synth_material(**material)
+        return
+    depth = resolve_depth(bit_depth, plan.depth, out_path)
 
     flow = read_flow(flow_file) if flow_file is not None else None
     streaming = flow is None and synthesizer.streams_rows
