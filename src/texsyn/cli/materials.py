@@ -335,7 +335,10 @@ def synth_material(
                     layer.output, stored, bit_depth=layer.out_depth, icc_profile=layer.icc_profile
                 )
             exemplar_shape = found.pixels.shape[:2]
-            stage_extra(outputs, map_path, result.source_map, lambda m: position_colors(m, exemplar_shape))
+            if result.source_map is not None:  # --source-map is refused earlier for other methods
+                stage_extra(
+                    outputs, map_path, result.source_map, lambda m: position_colors(m, exemplar_shape)
+                )
             outputs.write_text(side_path, sidecar)
     names = ", ".join(str(layer.output) for layer in layers)
     done(
