@@ -10,7 +10,6 @@ brick exemplar and saves the finished page to ``docs/images/web-compare.png``::
 from __future__ import annotations
 
 import argparse
-import shutil
 import sys
 import tempfile
 from pathlib import Path
@@ -19,10 +18,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 from playwright.sync_api import sync_playwright
 
+from browser_utils import CHROMIUM_FLAGS, find_chromium
 from web_utils import live_server
 
 ROOT = Path(__file__).resolve().parents[1]
-FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update"]
 
 
 def main() -> int:
@@ -30,11 +29,11 @@ def main() -> int:
     parser.add_argument("--out", type=Path, default=ROOT / "docs" / "images" / "web-compare.png")
     parser.add_argument("--methods", default="quilting,heeger_bergen,random_phase,efros_leung")
     args = parser.parse_args()
-    chromium = shutil.which("chromium") or shutil.which("chromium-browser")
+    chromium = find_chromium()
     if chromium is None:
         sys.exit("web_screenshot: Debian's chromium is needed (apt-get install chromium)")
     with tempfile.TemporaryDirectory() as folder, live_server(Path(folder)) as server, sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=chromium, args=FLAGS)
+        browser = p.chromium.launch(executable_path=chromium, args=CHROMIUM_FLAGS)
         page = browser.new_page(viewport={"width": 1400, "height": 1050}, bypass_csp=True)
         page.goto(server.page)
         page.wait_for_selector("#builtins button")

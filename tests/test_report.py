@@ -2,12 +2,12 @@
 
 import json
 import os
-import shutil
 import subprocess
 
 import pytest
 
 import texsyn
+from browser_utils import CHROMIUM_FLAGS, find_chromium
 from conftest import FAST_PARAMS
 from texsyn.cli import main
 from texsyn.report import run_comparison, write_report
@@ -104,25 +104,11 @@ window.addEventListener('load', function () {
 """
 
 
-def find_chromium():
-    for name in ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable"):
-        path = shutil.which(name)
-        if path:
-            return path
-    return None
-
-
 def chromium_args(binary, tmp_path):
     return [
         binary,
         "--headless",
-        "--no-sandbox",
-        "--disable-gpu",
-        "--disable-quic",
-        "--no-first-run",
-        "--disable-background-networking",
-        "--disable-component-update",
-        "--disable-sync",
+        *CHROMIUM_FLAGS,
         f"--user-data-dir={tmp_path / 'profile'}",
         "--virtual-time-budget=5000",
     ]

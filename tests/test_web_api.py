@@ -287,6 +287,21 @@ def test_a_huge_or_broken_request_body_is_refused(client):
     assert client.post("/api/jobs", content=b"{" + b" " * 100_000).status_code == 413
     response = client.post("/api/jobs", content=b"\xff\xfe not json")
     assert response.status_code == 400 and "JSON" in response.json()["error"]
+    response = client.post("/api/jobs", content=b"[" * 50_000)  # nested deeper than Python recurses
+    assert response.status_code == 400 and "JSON" in response.json()["error"]
+
+
+def test_the_largest_side_holds_for_the_default_output_size(tmp_path):
+    with live_server(tmp_path, max_side=200) as small, small.client() as c:
+        for mode in ("synth", "compare"):  # twice the 128x128 brick: 256x256
+            request = {"mode": mode, "exemplar": "builtin:brick", "methods": ["random_phase"]}
+            request = {k: v for k, v in request.items() if mode == "compare" or k != "methods"}
+            response = c.post("/api/jobs", json=request)
+            assert response.status_code == 422, response.text
+            assert "default output (256x256) is over the largest side 200" in response.json()["error"]
+        animated = c.post("/api/jobs", json={"mode": "animate", "exemplar": "builtin:brick", "frames": 2})
+        assert animated.status_code == 201, animated.text  # frames keep the exemplar's 128x128
+        c.post(f"/api/jobs/{animated.json()['id']}/cancel")
 
 
 def test_an_error_of_the_command_line_reaches_the_page_as_its_one_line(client):
@@ -322,6 +337,7 @@ def test_compare_and_animate_jobs(client):
     }
     compare["params"] = {"heeger_bergen": {"n_iterations": "2"}}
     animate = {"mode": "animate", "exemplar": "builtin:brick", "frames": 4, "size": [48, 48], "seed": 3}
+    animate["params"] = {"n_iterations": "5"}
     first = client.post("/api/jobs", json=compare).json()
     second = client.post("/api/jobs", json=animate).json()
     done = wait_for(client, first["id"], timeout=120)
@@ -330,10 +346,13 @@ def test_compare_and_animate_jobs(client):
     report = client.get(done["files"]["report"]["url"] + "&inline=1")
     assert report.headers["content-security-policy"].startswith("sandbox")
     assert "random_phase" in report.text and "heeger_bergen" in report.text
+    ran = client.get(done["files"]["report_json"]["url"]).json()["methods"]
+    assert [m["params"].get("n_iterations") for m in ran] == [None, 2]  # the job ran with them
     video = wait_for(client, second["id"], timeout=120)
     assert video["state"] == "done", video
     assert client.get(video["files"]["video"]["url"]).content[:4] == b"\x1a\x45\xdf\xa3"  # WebM (EBML)
-    assert client.get(video["files"]["run"]["url"]).json()["seed"] == 3
+    run = client.get(video["files"]["run"]["url"]).json()
+    assert run["seed"] == 3 and run["params"]["n_iterations"] == 5
 
 
 def test_the_queue_cancel_and_the_time_limit(tmp_path):
@@ -349,3 +368,57 @@ def test_the_queue_cancel_and_the_time_limit(tmp_path):
         timed_out = wait_for(c, first["id"], timeout=30)
         assert timed_out["state"] == "failed" and "time limit" in timed_out["error"]
         assert not any(p.suffix == ".part" or ".part" in p.name for p in (tmp_path / "jobs").rglob("*"))
+
+
+def test_unknown_routes_answer_with_the_one_line_error_too(client):
+    for path in (
+        "/api/nothing",
+        "/api/exemplars/..%2F..%2Fetc%2Fpasswd/preview",
+        "/static/../pyproject.toml",
+    ):
+        response = client.get(path)
+        assert response.status_code == 404 and set(response.json()) == {"error"}
+    assert set(client.put("/api/jobs").json()) == {"error"}
+
+
+def test_a_compare_report_names_the_users_file_not_the_servers_copy(server, client, uploaded):
+    request = {"mode": "compare", "exemplar": uploaded["id"], "methods": ["random_phase"], "size": [32, 32]}
+    job = wait_for(client, client.post("/api/jobs", json=request).json()["id"], timeout=120)
+    assert job["state"] == "done", job
+    data = client.get(job["files"]["report_json"]["url"]).json()
+    assert data["exemplar_path"] == "my blocks.png" and data["command_line"] == job["command_line"]
+    page = client.get(job["files"]["report"]["url"]).text
+    assert str(server.folder) not in page and "my blocks.png" in page
+
+
+def test_a_failed_measuring_step_leaves_the_output_with_a_warning(tmp_path):
+    import asyncio
+    import sys
+
+    from texsyn.web.jobs import JobManager
+    from texsyn.web.requests import DownloadFile, JobPlan
+    from texsyn.web.uploads import Exemplar
+
+    exemplar = Exemplar("builtin:brick", "builtin:brick", "builtin:brick", tmp_path / "p.png", 8, 8, 1)
+    make = [sys.executable, "-c", "open('texture.png', 'wb').write(b'png')"]
+    fail = [
+        sys.executable,
+        "-c",
+        "import sys; sys.stderr.write('texsyn: error: no memory left\\n'); sys.exit(1)",
+    ]
+    plan = JobPlan("synth", "x", exemplar, [make, fail], "texsyn synth ...", 1, {}, optional_from=1)
+    plan.files = {"image": DownloadFile("texture.png", "t.png", "image/png")}
+
+    async def run() -> dict:
+        manager = JobManager(tmp_path / "jobs", workers=1, queue_limit=1, timeout=60)
+        job = manager.submit(plan)
+        while job.state not in ("done", "failed", "cancelled"):
+            await asyncio.sleep(0.02)
+        return job.public()
+
+    record = asyncio.run(run())
+    assert record["state"] == "done" and "image" in record["files"]
+    assert record["warning"] == "the output is ready, but measuring it failed: no memory left"
+    plan.optional_from = None  # the same failure in a required step fails the job
+    record = asyncio.run(run())
+    assert record["state"] == "failed" and record["error"] == "no memory left"

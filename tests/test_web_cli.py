@@ -3,12 +3,15 @@ Ctrl-C, and a temporary folder that leaves nothing behind."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import signal
 import subprocess
 import sys
+import threading
 import time
+from pathlib import Path
 
 import httpx
 import pytest
@@ -61,6 +64,64 @@ def test_serve_prints_a_token_address_serves_and_leaves_nothing_on_a_signal(tmp_
         process.wait(timeout=30)
     assert process.returncode == status
     assert not list(tmp_path.iterdir())  # the uploads and results went with the server
+
+
+def children_of(pid: int) -> set[int]:
+    """Processes whose parent is ``pid`` (from /proc)."""
+    found = set()
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        with contextlib.suppress(OSError, IndexError, ValueError):
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+            if int(fields[1]) == pid and fields[0] != "Z":
+                found.add(int(stat.parent.name))
+    return found
+
+
+def alive(pid: int) -> bool:
+    with contextlib.suppress(OSError, IndexError):
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    return False
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
+def test_ctrl_c_stops_the_server_and_its_job_while_a_page_watches_the_job(tmp_path):
+    process, url, _ = start(tmp_path)
+    token = url.split("token=")[1]
+    base = url.split("/?")[0]
+    watched = threading.Event()
+
+    def watch(job_id: str) -> None:  # the page's event stream stays open while the job runs
+        with contextlib.suppress(httpx.HTTPError):
+            with httpx.stream("GET", f"{base}/api/jobs/{job_id}/events?token={token}", timeout=120) as r:
+                for _ in r.iter_lines():
+                    watched.set()
+
+    try:
+        long = {"exemplar": "builtin:brick", "method": "efros_leung", "size": [400, 400], "seed": 1}
+        job = httpx.post(f"{base}/api/jobs?token={token}", json=long, timeout=30).json()
+        threading.Thread(target=watch, args=(job["id"],), daemon=True).start()
+        deadline = time.monotonic() + 30
+        while not (watched.is_set() and children_of(process.pid)) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        workers = children_of(process.pid)
+        assert workers and watched.is_set()
+        started = time.monotonic()
+        process.send_signal(signal.SIGINT)
+        process.wait(timeout=20)
+        assert time.monotonic() - started < 10  # not when the job ends
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+            for pid in children_of(process.pid) | locals().get("workers", set()):
+                with contextlib.suppress(OSError):
+                    os.killpg(pid, signal.SIGKILL)  # each job runs in a session of its own
+    assert process.returncode == 130
+    deadline = time.monotonic() + 5
+    while any(alive(pid) for pid in workers) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not any(alive(pid) for pid in workers)  # the job's process went with the server
+    assert not list(tmp_path.iterdir())
 
 
 def test_serve_warns_when_it_listens_beyond_loopback(tmp_path):

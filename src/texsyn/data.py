@@ -6,7 +6,10 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["BUILTIN", "exemplar"]
+__all__ = ["BUILTIN", "BUILTIN_PREFIX", "exemplar"]
+
+#: how the command line and batch inputs name a built-in exemplar: ``builtin:brick``
+BUILTIN_PREFIX = "builtin:"
 
 #: name -> (scikit-image loader, description)
 BUILTIN = {

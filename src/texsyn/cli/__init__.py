@@ -11,8 +11,8 @@
 - :mod:`~texsyn.cli.progress`: the progress display;
 - the commands, each loaded when it runs (:class:`~texsyn.cli.app.LazyCommands`):
   :mod:`~texsyn.cli.synthesis` (``synth``), :mod:`~texsyn.cli.modification` (``modify``),
-  :mod:`~texsyn.cli.animation` (``animate``), :mod:`~texsyn.cli.comparison` (``compare``)
-  and :mod:`~texsyn.cli.listing` (``methods``).
+  :mod:`~texsyn.cli.animation` (``animate``), :mod:`~texsyn.cli.comparison` (``compare``),
+  :mod:`~texsyn.cli.batch` (``batch``) and :mod:`~texsyn.cli.listing` (``methods``).
 """
 
 from __future__ import annotations
@@ -34,6 +34,7 @@ from .app import (
 
 if TYPE_CHECKING:  # the names for type checkers; at run time ``__getattr__`` loads them
     from .animation import animate
+    from .batch import batch
     from .comparison import compare
     from .listing import list_methods
     from .modification import modify
@@ -46,6 +47,7 @@ __getattr__, __dir__ = lazy_exports(
     {
         "MAX_SIDE": "options",
         "animate": "animation",
+        "batch": "batch",
         "compare": "comparison",
         "list_methods": "listing",
         "modify": "modification",
@@ -63,6 +65,7 @@ __all__ = [
     "MAX_SIDE",
     "Terminated",
     "animate",
+    "batch",
     "cli",
     "compare",
     "list_methods",

@@ -19,8 +19,9 @@ or none through :class:`texsyn.io.OutputSet`: nothing is created or replaced on 
 
 This module holds the ``texsyn`` group, the entry point and the mapping of every outcome to
 one line and an exit status; the commands are in :mod:`~texsyn.cli.synthesis`,
-:mod:`~texsyn.cli.modification`, :mod:`~texsyn.cli.animation`, :mod:`~texsyn.cli.comparison`
-and :mod:`~texsyn.cli.listing`, each imported when its command runs (:data:`COMMANDS`).
+:mod:`~texsyn.cli.modification`, :mod:`~texsyn.cli.animation`, :mod:`~texsyn.cli.editing`,
+:mod:`~texsyn.cli.comparison` and :mod:`~texsyn.cli.listing`, each imported when its command
+runs (:data:`COMMANDS`).
 """
 
 from __future__ import annotations
@@ -74,7 +75,10 @@ COMMANDS = {
     "replay": "replay_command",
     "modify": "modify",
     "animate": "animate",
+    "fill": "fill_command",
+    "transfer": "transfer_command",
     "compare": "compare",
+    "batch": "batch",
     "serve": "serve",
     "methods": "list_methods",
 }
@@ -87,7 +91,10 @@ _command_function, _ = lazy_exports(
         "replay_command": "replaying",
         "modify": "modification",
         "animate": "animation",
+        "fill_command": "editing",
+        "transfer_command": "editing",
         "compare": "comparison",
+        "batch": "batch",
         "serve": "serving",
         "list_methods": "listing",
     },

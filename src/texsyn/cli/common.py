@@ -21,8 +21,8 @@ from pathlib import Path
 import click
 import numpy as np
 
-from .. import data
 from .._version import __version__
+from ..batch.synthesis import input_path, load_exemplar
 from ..errors import InputError
 from ..io import OutputSet, check_image_size, max_image_pixels, read_image, read_image_header
 from ..io.arrays import load_npy
@@ -60,24 +60,6 @@ class State:
 
 
 # ---------------------------------------------------------------------------- inputs
-def input_path(name: str | None) -> str | None:
-    """The file an exemplar/INPUT argument names (``None`` for the built-in textures)."""
-    if name is None or name.startswith(BUILTIN_PREFIX):
-        return None
-    return name
-
-
-def load_exemplar(exemplar: str | None) -> tuple[np.ndarray, str]:
-    """The image an exemplar argument names (a file, ``builtin:NAME``, or by default the
-    built-in brick) and how messages name it."""
-    if exemplar is None:
-        return data.exemplar("brick"), "built-in brick"
-    if exemplar.startswith(BUILTIN_PREFIX):
-        name = exemplar.split(":", 1)[1]
-        return data.exemplar(name), f"built-in {name}"
-    return read_image(exemplar), exemplar
-
-
 def read_flow(path: str) -> np.ndarray:
     """A flow field from a .npy array (H, W, 2) or from the red/green channels of an image."""
     if Path(path).suffix.lower() == ".npy":

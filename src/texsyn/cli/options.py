@@ -15,6 +15,7 @@ import re
 import click
 
 from .._validation import OneOf
+from ..data import BUILTIN_PREFIX
 from ..errors import InputError
 from ..methods import get_method
 
@@ -29,6 +30,7 @@ __all__ = [
     "bit_depth_option",
     "method_option",
     "option_params",
+    "per_method_params",
     "overwrite_option",
     "param_option",
     "parse_params",
@@ -38,8 +40,6 @@ __all__ = [
 
 MAX_SIDE = 100_000
 """Largest output side in pixels accepted by ``--size`` and ``--scale`` (memory is checked too)."""
-
-BUILTIN_PREFIX = "builtin:"
 
 OVERWRITE_HELP = "Replace existing output files (an output that names an input is refused anyway)."
 
@@ -178,6 +178,32 @@ def parse_params(method: str, items: tuple[str, ...]) -> dict:
         params[name] = spec.parse(value, method)
     # stacklevel=1: the warning names this module, which the command line shows (app.main)
     return cls.canonical_params(params, stacklevel=1)
+
+
+def per_method_params(items: tuple[str, ...], methods: list[str]) -> dict[str, dict]:
+    """``METHOD.NAME=VALUE`` items (``compare``, ``batch``) as ``{method: parameters}``.
+
+    Each method's values are parsed and checked by :func:`parse_params`.
+
+    Raises
+    ------
+    click.UsageError
+        An item not of the form ``METHOD.NAME=VALUE``.
+    InputError
+        An item for a method that is not among ``methods``, or a value :func:`parse_params` refuses.
+    """
+    overrides: dict[str, dict] = {}
+    for item in items:
+        key = item.split("=", 1)[0]
+        if "." not in key or "=" not in item:
+            raise click.UsageError(f"parameters are given as METHOD.NAME=VALUE, got {item!r}")
+        method, rest = item.split(".", 1)
+        if method not in methods:
+            raise InputError(
+                f"parameter {item!r} names method {method!r}, which is not among the methods run (-m)"
+            )
+        overrides.setdefault(method, {}).update(parse_params(method, (rest,)))
+    return overrides
 
 
 def method_option(method: str, name: str, help: str):

@@ -10,6 +10,9 @@ from ..errors import InputError
 
 __all__ = ["serve"]
 
+#: seconds the server waits for open requests when it stops (event streams end at once)
+GRACEFUL_SHUTDOWN = 3
+
 
 @click.command()
 @click.option(
@@ -114,8 +117,25 @@ def serve(
         )
     click.echo(f"texsyn: serving on {settings.url}", err=True)
     click.echo("texsyn: Ctrl-C stops the server and removes its results", err=True)
-    config = uvicorn.Config(create_app(settings), host=host, port=port, log_level="warning", lifespan="on")
-    server = uvicorn.Server(config)
+    application = create_app(settings)
+
+    class Server(uvicorn.Server):
+        async def shutdown(self, sockets=None):
+            # uvicorn waits for open requests before the application's shutdown, which stops
+            # the jobs: an event stream of a page watching a job would hold it until the job
+            # ends, so the streams end first (and any other request gets a moment only)
+            application.end_streams()
+            await super().shutdown(sockets)
+
+    config = uvicorn.Config(
+        application,
+        host=host,
+        port=port,
+        log_level="warning",
+        lifespan="on",
+        timeout_graceful_shutdown=GRACEFUL_SHUTDOWN,
+    )
+    server = Server(config)
     if open_browser:
         import threading
         import webbrowser

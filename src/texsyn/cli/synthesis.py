@@ -12,12 +12,13 @@ from __future__ import annotations
 import click
 import numpy as np
 
+from ..batch.synthesis import stream_bands
 from ..errors import InputError
 from ..io import sidecar_path
 from ..io.writing import JSON_FORMATS
 from ..methods import METHODS, SynthesisResult, get_method, make_method
 from ..ops import position_colors
-from ..ops.canvas import default_output_shape
+from ..ops.canvas import default_output_shape, prepare_exemplar
 from ..ops.materials import LayerEncoding
 from .common import (
     check_memory_before_reading,
@@ -54,7 +55,7 @@ from .options import (
 )
 from .progress import ProgressBar
 
-__all__ = ["synth"]
+__all__ = ["stream_bands", "synth"]
 
 
 @click.command()
@@ -116,6 +117,23 @@ __all__ = ["synth"]
     type=click.Path(dir_okay=False),
     help="Flow to synthesise along (grouplets): a .npy (H, W, 2) array of (row, col) vectors, or an image whose red and green channels map [0, 1] to row and column components in [-1, 1]. The output takes its size.",
 )
+@click.option(
+    "--guide-source",
+    type=click.Path(dir_okay=False),
+    help="Guide map of EXEMPLAR (an image of its size: labels as grey levels or colours); needs --guide-target (docs/editing.md).",
+)
+@click.option(
+    "--guide-target",
+    type=click.Path(dir_okay=False),
+    help="Guide map of the output (same kind of image); the output takes its size.",
+)
+@click.option(
+    "--guide-weight",
+    type=Number(0.0, 1e6),
+    default=1.0,
+    show_default=True,
+    help="Weight of the guides' mean squared difference against the overlap's.",
+)
 @overwrite_option()
 @quiet_option
 def synth(
@@ -134,6 +152,9 @@ def synth(
     with_images,
     with_normals,
     flow_file,
+    guide_source,
+    guide_target,
+    guide_weight,
     overwrite,
     quiet,
 ):
@@ -157,6 +178,9 @@ def synth(
             raise InputError(f"method {method!r} does not follow a flow; --flow needs method 'grouplets'")
         if size is not None or scale is not None:
             raise click.UsageError("--flow sets the output size; do not give --size or --scale")
+    guided = guide_source is not None or guide_target is not None
+    if guided:
+        check_guide_options(method, guide_source, guide_target, size, scale, flow_file)
     preparation = {"crop": exemplar_crop, "max_side": exemplar_max_side}
     material = {
         "exemplar": exemplar,
@@ -177,26 +201,29 @@ def synth(
         "quiet": quiet,
     }
     if with_images or with_normals:  # a material: -o is a folder (docs/materials.md)
-        if flow_file is not None:
-            raise click.UsageError("--flow synthesises one image; it takes no --with images")
+        if flow_file is not None or guided:
+            raise click.UsageError("--flow and --guide-* synthesise one image; they take no --with images")
         synth_material(**material)
         return
     outputs = output_set(overwrite)
     outputs.add_input(input_path(exemplar), "exemplar")
     outputs.add_input(flow_file, "flow file")
+    outputs.add_input(guide_source, "source guide")
+    outputs.add_input(guide_target, "target guide")
     out_path = outputs.claim(output, bit_depth=claimed_depth(bit_depth, output))
     map_path = claim_extra(outputs, source_map, "source map")
     side_path = outputs.claim(sidecar_path(out_path), formats=JSON_FORMATS, what="sidecar")
     plan = plan_exemplar(exemplar)
-    if plan.channels in (2, 4):  # alpha is carried like a material's image
-        if flow_file is not None:
-            raise click.UsageError("--flow synthesises one image; its exemplar has no alpha channel")
+    if plan.channels in (2, 4) and flow_file is None and not guided:  # alpha carried like colour
         synth_material(**material)
         return
     depth = resolve_depth(bit_depth, plan.depth, out_path)
 
     flow = read_flow(flow_file) if flow_file is not None else None
-    streaming = flow is None and synthesizer.streams_rows
+    guides = read_guides(guide_source, guide_target, exemplar_crop, exemplar_max_side) if guided else None
+    if guides is not None:
+        size = guides[1].shape[:2]
+    streaming = flow is None and guides is None and synthesizer.streams_rows
     check_memory_before_reading(
         synthesizer,
         exemplar,
@@ -208,6 +235,8 @@ def synth(
     found, label = read_exemplar(exemplar, preparation)
     encoding = LayerEncoding.of(found.pixels, linear=linear)
     image = found.pixels if encoding.is_identity else encoding.to_unit(found.pixels)
+    if guides is not None:
+        check_guide_sizes(guides[0], image, guide_source, exemplar)
     if flow is not None:
         shape = flow.shape[:2]
     elif size is not None:
@@ -232,7 +261,12 @@ def synth(
         options["exemplar_max_side"] = exemplar_max_side
     sidecar_args = {
         "outputs": {"image": out_path, "source_map": map_path, "sidecar": side_path},
-        "inputs": {"exemplar": exemplar or f"{BUILTIN_PREFIX}brick", "flow": flow_file},
+        "inputs": {
+            "exemplar": exemplar or f"{BUILTIN_PREFIX}brick",
+            "flow": flow_file,
+            "guide_source": guide_source,
+            "guide_target": guide_target,
+        },
         "method": method,
         "seed": seed,
         "options": options,
@@ -259,7 +293,10 @@ def synth(
                     side_path, sidecar_json("synth", params=synthesizer.get_params(), **sidecar_args)
                 )
         else:
-            if flow is not None:
+            if guides is not None:
+                options["guide_weight"] = guide_weight
+                result = synthesizer.sample_guided(*guides, weight=guide_weight, rng=seed, callback=bar)
+            elif flow is not None:
                 result = SynthesisResult(synthesizer.synthesize_along(flow, rng=seed, callback=bar))
             else:
                 result = synthesizer.sample_with_map(shape, rng=seed, callback=bar)
@@ -284,36 +321,35 @@ def synth(
     done(quiet, seed, drawn, f"wrote {out_path} ({w}x{h}, {method}, from {label}) and {side_path}")
 
 
-def stream_bands(
-    outputs,
-    synthesizer,
-    shape,
-    seed,
-    bar,
-    exemplar_shape,
-    out_path,
-    map_path,
-    depth,
-    *,
-    store=None,
-    icc_profile: bytes | None = None,
-) -> None:
-    """Write the bands of :meth:`~texsyn.methods.TextureSynthesizer.sample_rows` to the image
-    and source map files as they come: the float output is never held whole. ``store``
-    turns a band into the values the file keeps (:func:`~texsyn.cli.materials.to_stored`)."""
-    channels = () if len(exemplar_shape) == 2 else (exemplar_shape[2],)
-    image_rows = outputs.open_rows(
-        out_path, tuple(shape) + channels, bit_depth=depth, icc_profile=icc_profile
-    )
-    map_rows = None
-    if map_path is not None:
-        npy = map_path.suffix.lower() == ".npy"
-        map_rows = outputs.open_rows(map_path, tuple(shape) + ((2,) if npy else (3,)), dtype=np.int32)
-    for band in synthesizer.sample_rows(shape, rng=seed, callback=bar):
-        image_rows.write(band.image if store is None else store(band.image))
-        if map_rows is not None:
-            source = band.source_map
-            map_rows.write(source if npy else position_colors(source, exemplar_shape[:2]))
-    image_rows.close()
-    if map_rows is not None:
-        map_rows.close()
+def check_guide_options(method, guide_source, guide_target, size, scale, flow_file) -> None:
+    """Refuse guide options that cannot work together, before any file is read."""
+    from ..editing import GUIDED_METHODS
+
+    if guide_source is None or guide_target is None:
+        raise click.UsageError("give both --guide-source and --guide-target")
+    if method not in GUIDED_METHODS:
+        raise InputError(
+            f"method {method!r} does not follow guide maps; methods that do: {', '.join(GUIDED_METHODS)}"
+        )
+    if size is not None or scale is not None or flow_file is not None:
+        raise click.UsageError("--guide-target sets the output size; do not give --size, --scale or --flow")
+
+
+def read_guides(guide_source, guide_target, crop, max_side) -> tuple[np.ndarray, np.ndarray]:
+    """The two guide maps, the exemplar's prepared as the exemplar is (crop, shrink)."""
+    from ..io import read_image
+
+    source = prepare_exemplar(read_image(guide_source), crop=crop, max_side=max_side)
+    target = read_image(guide_target)
+    if source.ndim != target.ndim:
+        raise InputError("the two guides must both be grey or both colour")
+    return source, target
+
+
+def check_guide_sizes(source, image, guide_source, exemplar) -> None:
+    """The exemplar's guide must have the exemplar's size (after --exemplar-crop/-max-side)."""
+    if source.shape[:2] != image.shape[:2]:
+        raise InputError(
+            f"guide '{guide_source}' is {source.shape[1]}x{source.shape[0]} pixels and the exemplar "
+            f"{exemplar or 'builtin:brick'} {image.shape[1]}x{image.shape[0]}; they must have the same size"
+        )

@@ -42,6 +42,7 @@ import numpy as np
 from ..ops.canvas import padded_canvas
 from ..ops.kcoherence import CoherentWindows
 from ..ops.nonparametric import NonParametricSampler, schedule_batches
+from ..ops.patches import as_channels
 from ..ops.progress import Reporter
 from ..ops.window_screen import gather_windows
 
@@ -135,6 +136,7 @@ def fill_blocks(
     *,
     seed: np.ndarray | None = None,
     reporter: Reporter | None = None,
+    known: np.ndarray | None = None,
 ) -> np.ndarray:
     """Fill ``canvas`` block by block in raster order (rows, then columns within a row).
 
@@ -159,19 +161,29 @@ def fill_blocks(
         but is not reported (Raad et al. 2016, Algorithm 2, line 1).
     reporter : Reporter, optional
         Receives ``(done, total)`` after every block, ``total = len(rows) * len(cols)``.
+    known : ndarray of bool, shape (H, W), optional
+        Canvas pixels known before the loop (hole filling, ``docs/editing.md``): the blocks
+        see them as known, and a block whose pixels are all known is skipped (counted as
+        done). By default nothing is known.
 
     Returns
     -------
     ndarray of bool, shape (H, W)
-        Which canvas pixels were written.
+        Which canvas pixels were written (or known from the start).
     """
-    known = np.zeros(canvas.shape[:2], dtype=bool)
+    skip_known = known is not None
+    known = np.zeros(canvas.shape[:2], dtype=bool) if known is None else np.array(known, dtype=bool)
     total = len(rows) * len(cols)
     done = 0
     for x in rows:
         for y in cols:
             window = canvas[x : x + size, y : y + size]
             mask = known[x : x + size, y : y + size]
+            if skip_known and mask.all():
+                done += 1
+                if reporter is not None:
+                    reporter(done, total)
+                continue
             if done == 0 and seed is not None:
                 window[...] = seed
                 mask[...] = True
@@ -337,6 +349,8 @@ def grow_pixels(
     rng: np.random.Generator,
     reporter: Reporter | None = None,
     max_batch: int = 256,
+    known: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    guide: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Grow a texture pixel by pixel from a seed (Efros and Leung 1999, section 2).
 
@@ -376,16 +390,28 @@ def grow_pixels(
         Receives ``(filled, total)`` after every pass.
     max_batch : int
         Most pixels searched in one matrix product (the result does not depend on it).
+    known : (ndarray, ndarray, ndarray), optional
+        Constrained synthesis (hole filling, the paper's section 2 and ``docs/editing.md``):
+        ``(values (H, W, C), mask (H, W) of bool, source (H, W, 2))``, the pixels known
+        from the start, their values and their source (``-1`` for none). No seed is placed
+        then; the unknown pixels grow inwards from the known ones, by the same passes, and
+        the known pixels are returned unchanged.
+    guide : ndarray, shape (H, W) or (H, W, G), optional
+        The output's guide map, for a sampler built with the exemplar's
+        (:class:`~texsyn.ops.nonparametric.NonParametricSampler` ``guide``; guided
+        synthesis, ``docs/editing.md``): every search gets the guide around its pixel
+        (the borders repeated). The search is then the matrix product.
 
     Returns
     -------
     values : ndarray, shape (H, W, C), float64
-        The synthesised channels (every pixel equals the exemplar pixel its source names).
+        The synthesised channels (every synthesised pixel equals the exemplar pixel its
+        source names).
     source : ndarray of int64, shape (H, W, 2)
         Exemplar ``(row, col)`` of every output pixel.
     """
     ex = sampler.exemplar
-    ex_h, ex_w, channels = ex.shape
+    channels = ex.shape[2]
     height, width = shape
     window = sampler.window
     r = window // 2
@@ -396,24 +422,24 @@ def grow_pixels(
         r,
     )
     values, filled, source = canvas.values, canvas.filled, canvas.source
+    if guide is not None:
+        if not isinstance(sampler, NonParametricSampler) or not sampler.guide_channels:
+            raise ValueError("a guide needs a NonParametricSampler built with the exemplar's guide")
+        canvas.guide_windows = np.lib.stride_tricks.sliding_window_view(
+            np.pad(as_channels(np.asarray(guide, dtype=np.float64)), ((r, r), (r, r), (0, 0)), mode="edge"),
+            (window, window),
+            axis=(0, 1),
+        )
 
-    if seed_block is None:
-        sh = sw = int(min(seed_size, height, width, ex_h, ex_w))
-        si, sj = int(rng.integers(ex_h - sh + 1)), int(rng.integers(ex_w - sw + 1))
+    if known is None:
+        n_filled = _place_seed(canvas, ex, seed_size, seed_block, rng)
     else:
-        si, sj, sh, sw = (int(v) for v in seed_block)
-        if sh > height:
-            si, sh = si + (sh - height) // 2, height
-        if sw > width:
-            sj, sw = sj + (sw - width) // 2, width
-    top, left = (height - sh) // 2, (width - sw) // 2
-    values[top + r : top + r + sh, left + r : left + r + sw] = ex[si : si + sh, sj : sj + sw]
-    filled[top + r : top + r + sh, left + r : left + r + sw] = True
-    seed_rows, seed_cols = np.meshgrid(np.arange(sh), np.arange(sw), indexing="ij")
-    source[top : top + sh, left : left + sw, 0] = seed_rows + si
-    source[top : top + sh, left : left + sw, 1] = seed_cols + sj
-
-    n_filled, total = sh * sw, height * width
+        start_values, start_mask, start_source = known
+        values[r : r + height, r : r + width] = start_values
+        filled[r : r + height, r : r + width] = start_mask
+        source[...] = start_source
+        n_filled = int(np.count_nonzero(start_mask))
+    total = height * width
     threshold = float(max_error)
     near = np.zeros((height + 2, width + 2), dtype=bool)  # filled pixels, dilated by one
     # one thread computes the next chunk's lower bounds while this one is matched
@@ -446,6 +472,29 @@ def grow_pixels(
     return values[r : r + height, r : r + width], source
 
 
+def _place_seed(canvas, ex, seed_size, seed_block, rng) -> int:
+    """The seed of :func:`grow_pixels` at the centre of the canvas; pixels placed."""
+    ex_h, ex_w = ex.shape[:2]
+    height, width = canvas.source.shape[:2]
+    r = canvas.r
+    if seed_block is None:
+        sh = sw = int(min(seed_size, height, width, ex_h, ex_w))
+        si, sj = int(rng.integers(ex_h - sh + 1)), int(rng.integers(ex_w - sw + 1))
+    else:
+        si, sj, sh, sw = (int(v) for v in seed_block)
+        if sh > height:
+            si, sh = si + (sh - height) // 2, height
+        if sw > width:
+            sj, sw = sj + (sw - width) // 2, width
+    top, left = (height - sh) // 2, (width - sw) // 2
+    canvas.values[top + r : top + r + sh, left + r : left + r + sw] = ex[si : si + sh, sj : sj + sw]
+    canvas.filled[top + r : top + r + sh, left + r : left + r + sw] = True
+    seed_rows, seed_cols = np.meshgrid(np.arange(sh), np.arange(sw), indexing="ij")
+    canvas.source[top : top + sh, left : left + sw, 0] = seed_rows + si
+    canvas.source[top : top + sh, left : left + sw, 1] = seed_cols + sj
+    return sh * sw
+
+
 @dataclass
 class _Canvas:
     """What :func:`grow_pixels` grows: the padded values and mask, and the source map."""
@@ -462,6 +511,7 @@ class _Canvas:
             self.values, (window, window), axis=(0, 1)
         )
         self.known_windows = np.lib.stride_tricks.sliding_window_view(self.filled, (window, window))
+        self.guide_windows: np.ndarray | None = None  # the output's guide, for guided synthesis
 
 
 class _ExactPass:
@@ -528,7 +578,11 @@ class _ExactPass:
         members = slice(int(bounds[batch]), int(bounds[batch + 1]))
         pr, pc = rows[members], cols[members]
         windows, known = np.moveaxis(canvas.value_windows[pr, pc], 1, 3), canvas.known_windows[pr, pc]
-        src, err = sampler.match(windows, known, tolerance, uniforms[members])
+        if canvas.guide_windows is None:
+            src, err = sampler.match(windows, known, tolerance, uniforms[members])
+        else:
+            guides = np.moveaxis(canvas.guide_windows[pr, pc], 1, 3)
+            src, err = sampler.match_guided(windows, known, tolerance, uniforms[members], guides)
         ok = err <= threshold
         pr, pc, src = pr[ok], pc[ok], src[ok]
         canvas.values[pr + r, pc + r] = sampler.exemplar[src[:, 0], src[:, 1]]

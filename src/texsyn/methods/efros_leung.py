@@ -2,17 +2,20 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Annotated
 
 import numpy as np
 
-from .._validation import OneOf, Range
+from .._validation import OneOf, Range, as_exemplar, normalize_rng
 from ..drivers.raster import grow_pixels
 from ..errors import InputError
 from ..ops.kcoherence import CoherentWindows
+from ..ops.linalg import fixed_order
 from ..ops.nonparametric import NonParametricSampler
-from ..ops.progress import Reporter
-from ._base import TextureSynthesizer
+from ..ops.patches import as_channels
+from ..ops.progress import Progress, Reporter
+from ._base import SynthesisResult, TextureSynthesizer
 from ._memory import nonparametric_bytes, output_bytes, shape_dims
 
 __all__ = ["EfrosLeung"]
@@ -154,3 +157,113 @@ class EfrosLeung(TextureSynthesizer):
             reporter=Reporter(callback, "pixels"),
         )
         return values, source
+
+    @fixed_order
+    def fill(
+        self,
+        image: np.ndarray,
+        known: np.ndarray,
+        *,
+        exemplar_mask: np.ndarray | None = None,
+        rng: None | int | np.random.Generator = None,
+        callback: Callable[[Progress], None] | None = None,
+    ) -> SynthesisResult:
+        """Constrained synthesis (section 2): fill the unknown pixels of ``image``.
+
+        The known pixels stay as they are; the unknown ones grow inwards from them by the
+        passes of synthesis (:func:`texsyn.drivers.raster.grow_pixels`): "onion peel", each
+        pass taking the unknown pixels that touch known ones, those with the most known
+        pixels in their window first, each the centre of an exemplar window within
+        ``(1 + tolerance)`` of the best distance on its known pixels (``docs/editing.md``).
+        The search is the exact one (``search='approximate'`` is not used here).
+
+        Parameters
+        ----------
+        image : ndarray, shape (H, W) or (H, W, C)
+            Values in [0, 1], the exemplar's channels; unknown pixels may hold anything.
+        known : ndarray of bool, shape (H, W)
+            The pixels to keep.
+        exemplar_mask : ndarray of bool, optional
+            The exemplar pixels that may be used: only the windows lying wholly in it are
+            candidates (filling from the rest of the image itself). All by default.
+        rng, callback
+            As in :meth:`sample`; progress stage ``"pixels"``.
+
+        Returns
+        -------
+        SynthesisResult
+            The filled image (float32) and the exemplar position of every pixel (``-1``
+            for the known pixels).
+        """
+        ex = as_channels(self._require_fitted())
+        img = as_channels(as_exemplar(image, name="image"))
+        mask = np.asarray(known, dtype=bool)
+        if mask.shape != img.shape[:2] or img.shape[2] != ex.shape[2]:
+            raise InputError(
+                f"image {img.shape} and mask {mask.shape} must have one size, and the exemplar's "
+                f"{ex.shape[2]} channel(s)"
+            )
+        if exemplar_mask is not None:
+            try:
+                sampler = NonParametricSampler(ex, self.window_size, allowed=exemplar_mask)
+            except ValueError:
+                raise InputError(
+                    f"no {self.window_size}x{self.window_size} window of the exemplar lies wholly in its "
+                    "known pixels; give a smaller window_size or an exemplar"
+                ) from None
+        elif isinstance(self.sampler_, NonParametricSampler):
+            sampler = self.sampler_
+        else:
+            sampler = NonParametricSampler(ex, self.window_size)
+        start_source = np.full(mask.shape + (2,), -1, dtype=np.int64)
+        values, source = grow_pixels(
+            sampler,
+            mask.shape,
+            tolerance=self.tolerance,
+            max_error=self.max_error,
+            rng=normalize_rng(rng),
+            reporter=Reporter(callback, "pixels"),
+            known=(img, mask, start_source),
+        )
+        values = np.where(mask[..., None], img, values)
+        return SynthesisResult(self._as_output(values), np.asarray(source, dtype=np.int32))
+
+    @fixed_order
+    def sample_guided(
+        self,
+        guide_source: np.ndarray,
+        guide_target: np.ndarray,
+        *,
+        weight: float = 1.0,
+        rng: None | int | np.random.Generator = None,
+        callback: Callable[[Progress], None] | None = None,
+    ) -> SynthesisResult:
+        """Guided synthesis: grow a texture whose guide map follows ``guide_target``.
+
+        The growth of :meth:`sample` (section 2), each pixel's distance adding ``weight``
+        times the Gaussian-weighted mean squared difference between the exemplar window's
+        guide (``guide_source``, the exemplar's size) and the output's guide around the
+        pixel (``guide_target``, the output's size, which the output takes), over the whole
+        window, the pixel itself included (``docs/editing.md``). The search is the exact
+        float64 matrix product (the float32 screen of synthesis knows nothing of guides).
+        """
+        ex = as_channels(self._require_fitted())
+        source = as_channels(np.asarray(guide_source, dtype=np.float64))
+        target = as_channels(np.asarray(guide_target, dtype=np.float64))
+        if source.shape[:2] != ex.shape[:2] or source.shape[2] != target.shape[2]:
+            raise InputError(
+                f"the exemplar's guide ({source.shape[1]}x{source.shape[0]}) must have the exemplar's size "
+                f"({ex.shape[1]}x{ex.shape[0]}) and the channels of the output's guide"
+            )
+        sampler = NonParametricSampler(ex, self.window_size, guide=source, guide_weight=weight)
+        values, source_map = grow_pixels(
+            sampler,
+            target.shape[:2],
+            tolerance=self.tolerance,
+            max_error=self.max_error,
+            seed_size=self.seed_size,
+            rng=normalize_rng(rng),
+            reporter=Reporter(callback, "pixels"),
+            guide=target,
+        )
+        return SynthesisResult(self._as_output(values), np.asarray(source_map, dtype=np.int32))

@@ -1,19 +1,34 @@
-"""Efros–Freeman image quilting (Efros and Freeman 2001); ``docs/methods/quilting.md``."""
+"""Efros–Freeman image quilting (Efros and Freeman 2001); ``docs/methods/quilting.md``.
+
+Why this module is long: the paper's three uses of the block loop are here, side by side,
+on one set of parameters and the same two steps (the candidate rule and the boundary-cut
+paste): synthesis (section 2.1), texture transfer and guided synthesis (section 3, one pass
+with a correspondence term), and hole filling (``docs/editing.md``).
+"""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Annotated
 
 import numpy as np
 
-from .._validation import Range
-from ..drivers.raster import Block, block_canvas, block_positions, fill_block_rows
+from .._validation import Range, as_exemplar, normalize_rng
+from ..drivers.raster import (
+    Block,
+    block_canvas,
+    block_positions,
+    fill_block_rows,
+    fill_blocks,
+    raster_positions,
+)
 from ..errors import InputError
+from ..ops.linalg import fixed_order
 from ..ops.patches import as_channels
-from ..ops.progress import Reporter
+from ..ops.progress import Progress, Reporter
 from ..ops.seams import cut_mask
 from ..ops.search import FFTPatchSearch
-from ._base import TextureSynthesizer
+from ._base import SynthesisResult, TextureSynthesizer
 from ._memory import CALIBRATED_MARGIN, fft_search_terms, output_bytes, shape_dims
 
 __all__ = ["Quilting"]
@@ -135,9 +150,14 @@ class Quilting(TextureSynthesizer):
         if not block.known.any():
             return int(rng.integers(anchor_rows)), int(rng.integers(anchor_cols))
         d = self.search_.distances(block.values, block.known.astype(np.float64), energies=energies)
+        return self._pick(d, rng)
+
+    def _pick(self, d: np.ndarray, rng: np.random.Generator) -> tuple[int, int]:
+        """One anchor at random among those within ``(1 + tolerance)`` of the smallest error
+        ``d`` (section 2.1; infinite errors are never candidates)."""
         best = d.min()
         cand = np.flatnonzero(d.ravel() <= best * (1.0 + self.tolerance) + 1e-9)
-        ti, tj = divmod(int(cand[rng.integers(cand.size)]), anchor_cols)
+        ti, tj = divmod(int(cand[rng.integers(cand.size)]), d.shape[1])
         return ti, tj
 
     def _paste(
@@ -148,7 +168,7 @@ class Quilting(TextureSynthesizer):
         The canvas carries the exemplar position of every pixel as two extra channels
         after the colour ones (exact in float64), so that the cut places both at once.
         """
-        b, c = self.patch_size, exemplar.shape[2]
+        b, c = offsets.shape[0], exemplar.shape[2]
         ti, tj = corner
         old = block.values
         new = np.concatenate([exemplar[ti : ti + b, tj : tj + b], offsets + (ti, tj)], axis=-1)
@@ -192,3 +212,282 @@ class Quilting(TextureSynthesizer):
             source[top : top + rows.shape[0]] = rows_source
             top += rows.shape[0]
         return image, source
+
+    # ------------------------------------------------------------------ editing (docs/editing.md)
+    @fixed_order
+    def fill(
+        self,
+        image: np.ndarray,
+        known: np.ndarray,
+        *,
+        exemplar_mask: np.ndarray | None = None,
+        rng: None | int | np.random.Generator = None,
+        callback: Callable[[Progress], None] | None = None,
+    ) -> SynthesisResult:
+        """Fill the unknown pixels of ``image`` with blocks of the fitted exemplar.
+
+        Blocks of ``patch_size`` cover the hole's bounding box (grown by the overlap) in
+        raster order, every ``patch_size - overlap`` pixels (the last one moved back to end
+        on the box); a block whose pixels are all known is skipped. Each block is chosen as
+        in synthesis (section 2.1), its error being the squared error on all the pixels of
+        the block already known (the image's known pixels, whatever their shape, and the
+        blocks placed before it), and joined by the minimum-error boundary cut through the
+        leading overlap with earlier blocks; the image's known pixels are then put back, so
+        they are kept exactly (``docs/editing.md``).
+
+        Parameters
+        ----------
+        image : ndarray, shape (H, W) or (H, W, C)
+            Values in [0, 1], the exemplar's channels; unknown pixels may hold anything.
+        known : ndarray of bool, shape (H, W)
+            The pixels to keep.
+        exemplar_mask : ndarray of bool, optional
+            The exemplar pixels that may be copied: only the blocks lying wholly in it are
+            candidates (filling from the rest of the image itself). All by default.
+        rng, callback
+            As in :meth:`sample`; progress stage ``"blocks"``.
+
+        Returns
+        -------
+        SynthesisResult
+            The filled image (float32) and the exemplar position of every pixel (``-1``
+            for the known pixels).
+        """
+        ex = as_channels(self._require_fitted())
+        img, known = _editing_input(image, known, ex.shape[2])
+        generator = normalize_rng(rng)
+        b, o = self.patch_size, self._overlap()
+        height, width = known.shape
+        if min(height, width) < b:
+            raise InputError(f"image of {width}x{height} pixels is smaller than patch_size={b}")
+        allowed = None if exemplar_mask is None else _blocks_inside(exemplar_mask, b)
+        if allowed is not None and not allowed.any():
+            raise InputError(
+                f"no {b}x{b} block of the exemplar lies wholly in its known pixels; "
+                "give a smaller patch_size or an exemplar"
+            )
+        c = ex.shape[2]
+        canvas = np.concatenate([img, np.full((height, width, 2), -1.0)], axis=-1)
+        hole_rows, hole_cols = np.nonzero(~known)
+        rows = _covering_blocks(int(hole_rows.min()), int(hole_rows.max()) + 1, height, b, o)
+        cols = _covering_blocks(int(hole_cols.min()), int(hole_cols.max()) + 1, width, b, o)
+        offsets = np.stack(np.meshgrid(np.arange(b), np.arange(b), indexing="ij"), axis=-1).astype(np.float64)
+        energies: dict = {}
+
+        def choose(block: Block) -> tuple[int, int]:
+            if not block.known.any():
+                if allowed is None:
+                    anchor_rows, anchor_cols = self.search_.anchor_shape
+                    return int(generator.integers(anchor_rows)), int(generator.integers(anchor_cols))
+                free = np.flatnonzero(allowed)
+                ti, tj = divmod(int(free[generator.integers(free.size)]), allowed.shape[1])
+                return ti, tj
+            values = block.values[..., :c]
+            d = self.search_.distances(values, block.known.astype(np.float64), energies=energies)
+            if allowed is not None:
+                d = np.where(allowed, d, np.inf)
+            return self._pick(d, generator)
+
+        def paste(block: Block, corner: tuple[int, int]) -> np.ndarray:
+            new = self._paste(block, corner, ex, offsets)
+            kept = known[block.row : block.row + b, block.col : block.col + b]
+            return np.where(kept[..., None], block.values, new)
+
+        fill_blocks(canvas, rows, cols, b, choose, paste, known=known, reporter=Reporter(callback, "blocks"))
+        canvas[..., :c] = np.where(known[..., None], img, canvas[..., :c])
+        return SynthesisResult(self._as_output(canvas[..., :c]), canvas[..., c:].astype(np.int32))
+
+    @fixed_order
+    def transfer(
+        self,
+        texture_map: np.ndarray,
+        target_map: np.ndarray,
+        *,
+        alpha: float = 0.1,
+        iterations: int = 1,
+        rng: None | int | np.random.Generator = None,
+        callback: Callable[[Progress], None] | None = None,
+    ) -> SynthesisResult:
+        """Texture transfer (section 3): quilt the exemplar so that it follows ``target_map``.
+
+        Every block's error is ``alpha_i`` times its mean squared error on the overlap with
+        the blocks already placed (from the second iteration on, on the whole block, against
+        the previous iteration's result where nothing is placed yet) plus ``1 - alpha_i``
+        times the mean squared error between the correspondence maps of the exemplar block
+        and of the output block; the candidates and the cut are those of synthesis. The
+        iterations shrink the block by a third each time, and ``alpha_i = alpha + (0.9 -
+        alpha) (i - 1) / (N - 1)``: the paper's ``0.8 (i - 1) / (N - 1) + 0.1`` for the
+        default ``alpha = 0.1`` (``docs/editing.md``).
+
+        Parameters
+        ----------
+        texture_map : ndarray, shape (H0, W0) or (H0, W0, G)
+            The exemplar's correspondence map (its blurred luminance, in the paper).
+        target_map : ndarray, shape (H, W) or (H, W, G)
+            The output's correspondence map (the target's blurred luminance); the output
+            takes its size.
+        alpha : float
+            Weight of the overlap error in the first iteration, in [0, 1].
+        iterations : int
+            Number of passes ``N``.
+        rng, callback
+            As in :meth:`sample`; progress stages ``"iteration i/N"``.
+
+        Returns
+        -------
+        SynthesisResult
+            The output and its source map (exemplar position of every pixel).
+        """
+        ex = as_channels(self._require_fitted())
+        texture_map, target_map = _map_pair(texture_map, target_map, ex.shape[:2])
+        generator = normalize_rng(rng)
+        sizes = [int(round(self.patch_size * (2.0 / 3.0) ** i)) for i in range(int(iterations))]
+        if sizes[-1] < 3:
+            raise InputError(
+                f"{iterations} iterations shrink patch_size={self.patch_size} to blocks of {sizes[-1]} "
+                "pixels; give fewer iterations or a larger patch_size (the last block needs at least 3)"
+            )
+        previous = None
+        image = source = np.empty(0)
+        for i, b in enumerate(sizes):
+            weight = alpha if len(sizes) == 1 else alpha + (0.9 - alpha) * i / (len(sizes) - 1)
+            overlap = (
+                max(1, b // 6)
+                if self.overlap is None
+                else max(1, min(b - 1, self.overlap * b // self.patch_size))
+            )
+            reporter = Reporter(callback, f"iteration {i + 1}/{len(sizes)}")
+            image, source = self._quilt_matching(
+                ex, texture_map, target_map, b, overlap, weight, 1.0 - weight, previous, generator, reporter
+            )
+            previous = image
+        return SynthesisResult(self._as_output(image), source.astype(np.int32))
+
+    @fixed_order
+    def sample_guided(
+        self,
+        guide_source: np.ndarray,
+        guide_target: np.ndarray,
+        *,
+        weight: float = 1.0,
+        rng: None | int | np.random.Generator = None,
+        callback: Callable[[Progress], None] | None = None,
+    ) -> SynthesisResult:
+        """Guided synthesis: a texture whose guide map follows ``guide_target``.
+
+        Each block's error is its mean squared error on the overlap (as in :meth:`sample`)
+        plus ``weight`` times the mean squared difference between the guide of the exemplar
+        block (``guide_source``, the exemplar's size) and the output's guide under the
+        block (``guide_target``, the output's size): a user paints which material goes
+        where (``docs/editing.md``).
+        """
+        ex = as_channels(self._require_fitted())
+        guide_source, guide_target = _map_pair(guide_source, guide_target, ex.shape[:2])
+        b, o = self.patch_size, self._overlap()
+        image, source = self._quilt_matching(
+            ex,
+            guide_source,
+            guide_target,
+            b,
+            o,
+            1.0,
+            float(weight),
+            None,
+            normalize_rng(rng),
+            Reporter(callback, "blocks"),
+        )
+        return SynthesisResult(self._as_output(image), source.astype(np.int32))
+
+    def _quilt_matching(
+        self, ex, texture_map, target_map, b, o, local_weight, map_weight, previous, rng, reporter
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """One raster pass of blocks of side ``b`` whose error adds a map term (section 3).
+
+        The exemplar and its map are searched together (one FFT search of ``C + G``
+        channels, each with its own weights): ``local_weight`` over the ``C`` colour
+        channels of the known pixels (or, with ``previous``, of every pixel: the overlap
+        and the previous result), ``map_weight`` over the ``G`` map channels of every
+        pixel, each as a mean per pixel and channel.
+        """
+        shape = target_map.shape[:2]
+        c, g = ex.shape[2], texture_map.shape[2]
+        search = FFTPatchSearch(np.concatenate([ex, texture_map], axis=-1), (b, b))
+        rows, cols = block_canvas(shape, b, b - o)
+        pad = ((0, rows - shape[0]), (0, cols - shape[1]), (0, 0))
+        target = np.pad(target_map, pad, mode="edge")
+        before = None if previous is None else np.pad(as_channels(previous), pad, mode="edge")
+        canvas = np.zeros((rows, cols, c + 2))
+        offsets = np.stack(np.meshgrid(np.arange(b), np.arange(b), indexing="ij"), axis=-1).astype(np.float64)
+        energies: dict = {}
+        map_weights = np.full((b, b, g), map_weight / (b * b * g))
+
+        def choose(block: Block) -> tuple[int, int]:
+            x, y = block.row, block.col
+            values, local = block.values[..., :c], block.known.astype(np.float64)
+            if before is not None:
+                values = np.where(block.known[..., None], values, before[x : x + b, y : y + b])
+                local = np.ones((b, b))
+            count = local.sum()
+            scale = local_weight / (count * c) if count > 0 else 0.0
+            weights = np.concatenate([np.repeat((local * scale)[..., None], c, axis=2), map_weights], axis=2)
+            query = np.concatenate([values, target[x : x + b, y : y + b]], axis=-1)
+            return self._pick(search.distances(query, weights, energies=energies), rng)
+
+        fill_blocks(
+            canvas,
+            block_positions(shape[0], b, b - o),
+            block_positions(shape[1], b, b - o),
+            b,
+            choose,
+            lambda block, corner: self._paste(block, corner, ex, offsets),
+            reporter=reporter,
+        )
+        return canvas[: shape[0], : shape[1], :c], canvas[: shape[0], : shape[1], c:]
+
+
+def _editing_input(image: np.ndarray, known: np.ndarray, channels: int) -> tuple[np.ndarray, np.ndarray]:
+    """An image to fill as ``(H, W, C)`` float64 and its mask of known pixels, checked."""
+    img = as_channels(as_exemplar(image, name="image"))
+    mask = np.asarray(known, dtype=bool)
+    if mask.shape != img.shape[:2]:
+        raise InputError(f"mask of shape {mask.shape} does not match the image's {img.shape[:2]}")
+    if img.shape[2] != channels:
+        raise InputError(
+            f"image has {img.shape[2]} channels and the exemplar {channels}; give both grey or both colour"
+        )
+    return img, mask
+
+
+def _map_pair(source: np.ndarray, target: np.ndarray, exemplar_shape) -> tuple[np.ndarray, np.ndarray]:
+    """Two correspondence (or guide) maps as ``(H, W, G)`` float64 arrays, checked."""
+    first = as_channels(np.asarray(source, dtype=np.float64))
+    second = as_channels(np.asarray(target, dtype=np.float64))
+    if first.shape[:2] != tuple(exemplar_shape):
+        raise InputError(
+            f"the exemplar's map is {first.shape[1]}x{first.shape[0]} pixels; it must have the "
+            f"exemplar's size, {exemplar_shape[1]}x{exemplar_shape[0]}"
+        )
+    if first.shape[2] != second.shape[2]:
+        raise InputError(
+            f"the two maps have {first.shape[2]} and {second.shape[2]} channels; they must match"
+        )
+    if not (np.all(np.isfinite(first)) and np.all(np.isfinite(second))):
+        raise InputError("the maps must hold finite values")
+    return first, second
+
+
+def _blocks_inside(mask: np.ndarray, b: int) -> np.ndarray:
+    """Which ``b x b`` blocks (by top-left anchor) lie wholly in ``mask``: a box sum."""
+    inside = np.pad(np.asarray(mask, dtype=np.int64), ((1, 0), (1, 0))).cumsum(0).cumsum(1)
+    total = inside[b:, b:] - inside[:-b, b:] - inside[b:, :-b] + inside[:-b, :-b]
+    return total == b * b
+
+
+def _covering_blocks(start: int, stop: int, length: int, b: int, o: int) -> np.ndarray:
+    """Corners of blocks of side ``b`` (overlap ``o``) covering ``[start - o, stop + o)``
+    within ``[0, length)``, the last one moved back to end on the range."""
+    low, high = max(0, start - o), min(length, stop + o)
+    if high - low < b:
+        high = min(length, low + b)
+        low = high - b
+    return low + raster_positions(high - low, b, b - o)

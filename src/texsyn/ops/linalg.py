@@ -34,7 +34,19 @@ from typing import TypeVar
 
 import numpy as np
 
-__all__ = ["fixed_order", "matmul", "parallel_map", "worker_count", "BLOCK_ROWS", "BLOCK_COLUMNS"]
+__all__ = [
+    "fixed_order",
+    "matmul",
+    "parallel_map",
+    "worker_count",
+    "BLOCK_ROWS",
+    "BLOCK_COLUMNS",
+    "THREADS_VARIABLE",
+]
+
+#: the environment variable that caps texsyn's own threads (:func:`worker_count`); a batch
+#: worker sets it to 1 (``docs/batch.md``)
+THREADS_VARIABLE = "TEXSYN_NUM_THREADS"
 
 #: rows of the left operand in one block of :func:`matmul` (part of the rounding contract:
 #: changing it may change results in the last bits)
@@ -131,11 +143,16 @@ def fixed_order(func: F | None = None):
 
 
 def worker_count() -> int:
-    """Threads texsyn's own parallel loops may use: the CPUs this process may run on."""
+    """Threads texsyn's own parallel loops may use: the CPUs this process may run on, at most
+    ``TEXSYN_NUM_THREADS`` when that is a positive integer (read on every call)."""
     try:
-        return max(1, len(os.sched_getaffinity(0)))
+        cpus = max(1, len(os.sched_getaffinity(0)))
     except (AttributeError, OSError):  # pragma: no cover - non-Linux
-        return max(1, os.cpu_count() or 1)
+        cpus = max(1, os.cpu_count() or 1)
+    cap = os.environ.get(THREADS_VARIABLE, "").strip()
+    if cap.isdigit() and int(cap) >= 1:
+        return min(cpus, int(cap))
+    return cpus
 
 
 def parallel_map(function: Callable, items) -> list:

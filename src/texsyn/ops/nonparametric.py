@@ -12,6 +12,11 @@ of ``sigma = w / 6.4``, divided by the total weight. The candidates are every wi
 distance is at most ``(1 + tolerance)`` times the smallest; one is picked uniformly.
 :func:`schedule_batches` splits a pass of the growing loop into batches of pixels that do
 not interact, so that a batch can be searched with one matrix product.
+
+Why this module is long: the sampler keeps, beside the paper's search, the forms that
+editing needs (candidates restricted to the known part of an image, a guide term;
+``docs/editing.md``) next to the rule they share, and the two deprecated round-1 forms of
+the growing loop.
 """
 
 from __future__ import annotations
@@ -108,6 +113,18 @@ class NonParametricSampler:
         Any stack of real channels; distances sum over channels.
     window : int
         Odd side ``w`` of the square neighbourhood.
+    allowed : ndarray of bool, shape (H0, W0), optional
+        Exemplar pixels that may be used (hole filling from the rest of the image,
+        ``docs/editing.md``): only the windows lying wholly in it are candidates. By
+        default every window is. With it, :meth:`match` (the float64 matrix product) is the
+        search, not the float32 screen.
+    guide : ndarray, shape (H0, W0) or (H0, W0, G), optional
+        The exemplar's guide map (guided synthesis, ``docs/editing.md``): :meth:`match` then
+        takes the output's guide windows too and adds ``guide_weight`` times their
+        Gaussian-weighted mean squared difference (over the whole window) to the distance.
+        The search is :meth:`match` then.
+    guide_weight : float
+        Weight of the guide term.
 
     Examples
     --------
@@ -118,17 +135,42 @@ class NonParametricSampler:
     ([[1, 1]], True)
     """
 
-    def __init__(self, exemplar: np.ndarray, window: int = 11):
+    def __init__(
+        self,
+        exemplar: np.ndarray,
+        window: int = 11,
+        allowed: np.ndarray | None = None,
+        guide: np.ndarray | None = None,
+        guide_weight: float = 1.0,
+    ):
         self.exemplar = as_channels(np.asarray(exemplar, dtype=np.float64))
         self.window = int(window)
         radius = self.window // 2
         patches, anchors = extract_patches(self.exemplar, self.window)
+        self.guide_weight = float(guide_weight)
+        self.guide_channels = 0
+        if guide is not None:
+            guide = as_channels(np.asarray(guide, dtype=np.float64))
+            self.guide_channels = guide.shape[2]
+            patches = np.concatenate([patches, extract_patches(guide, self.window)[0]], axis=1)
         self.centres = anchors + radius
-        self.bank = WeightedPatchBank(patches)
         grid = np.arange(self.window) - radius
         sigma = self.window / 6.4
         self.gauss = np.exp(-(grid[:, None] ** 2 + grid[None, :] ** 2) / (2.0 * sigma**2))
-        self._screen = ScreenBank(self.exemplar, patches, self.gauss)
+        self.allowed_windows: np.ndarray | None = None
+        if allowed is not None:
+            inside = np.lib.stride_tricks.sliding_window_view(
+                np.asarray(allowed, dtype=bool), (window, window)
+            )
+            whole: np.ndarray = np.all(inside, axis=(2, 3))
+            keep = whole[anchors[:, 0], anchors[:, 1]]
+            if not keep.any():
+                raise ValueError(f"no {window}x{window} window lies wholly in the allowed pixels")
+            patches, self.centres = patches[keep], self.centres[keep]
+            self.allowed_windows = keep
+        self.bank = WeightedPatchBank(patches)
+        plain = allowed is None and guide is None
+        self._screen = ScreenBank(self.exemplar, patches, self.gauss) if plain else None
 
     @property
     def n_windows(self) -> int:
@@ -158,6 +200,8 @@ class NonParametricSampler:
         error : ndarray, shape (k,)
             Its distance (Gaussian-weighted SSD per unit weight).
         """
+        if self.guide_channels:
+            raise ValueError("a sampler with a guide is searched by match_guided")
         k, channels = windows.shape[0], self.exemplar.shape[2]
         weights = known * self.gauss
         norm = weights.sum(axis=(1, 2))
@@ -167,13 +211,49 @@ class NonParametricSampler:
         choice, error = _pick_candidates(d, float(tolerance), uniforms)
         return self.centres[choice], error
 
+    def match_guided(
+        self,
+        windows: np.ndarray,
+        known: np.ndarray,
+        tolerance: float,
+        uniforms: np.ndarray,
+        guides: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`match` for a sampler built with a ``guide`` (guided synthesis, ``docs/editing.md``).
+
+        The distance is the known pixels' Gaussian-weighted SSD per unit weight (as in
+        :meth:`match`) plus ``guide_weight`` times the Gaussian-weighted SSD per unit weight
+        of the guides over the whole window, its centre included: one matrix product.
+
+        Parameters
+        ----------
+        windows, known, tolerance, uniforms
+            As for :meth:`match`.
+        guides : ndarray, shape (k, w, w, G)
+            The output's guide around each pixel.
+        """
+        k, channels, g = windows.shape[0], self.exemplar.shape[2], self.guide_channels
+        if not g:
+            raise ValueError("match_guided needs a sampler built with a guide")
+        weights = known * self.gauss
+        weights = weights / weights.sum(axis=(1, 2))[:, None, None]
+        colour_w = np.broadcast_to(weights[..., None], weights.shape + (channels,))
+        guide_w = np.broadcast_to(
+            (self.guide_weight / self.gauss.sum()) * self.gauss[None, :, :, None],
+            (k,) + self.gauss.shape + (g,),
+        )
+        queries = np.concatenate([windows.reshape(k, -1), guides.reshape(k, -1)], axis=1)
+        all_w = np.concatenate([colour_w.reshape(k, -1), guide_w.reshape(k, -1)], axis=1)
+        choice, error = _pick_candidates(self.bank.distances(queries, all_w), float(tolerance), uniforms)
+        return self.centres[choice], error
+
     @property
     def screens(self) -> bool:
         """Whether :meth:`screen` and :meth:`match_screened` stand for :meth:`match`.
 
         False for a subclass with its own :meth:`match` (its rule is not the screened one).
         """
-        return type(self).match is NonParametricSampler.match
+        return type(self).match is NonParametricSampler.match and self._screen is not None
 
     def screen(
         self, windows: np.ndarray, known: np.ndarray, out: tuple[np.ndarray, np.ndarray] | None = None
@@ -189,10 +269,12 @@ class NonParametricSampler:
         out : (ndarray, ndarray), optional
             :meth:`screen_buffers` of at least ``k`` rows, used by the result.
         """
+        assert self._screen is not None, "a sampler with allowed windows does not screen"
         return self._screen.screen(windows, known, out)
 
     def screen_buffers(self, rows: int) -> tuple[np.ndarray, np.ndarray]:
         """Room for the bounds of up to ``rows`` windows (:meth:`screen`'s ``out``)."""
+        assert self._screen is not None, "a sampler with allowed windows does not screen"
         return self._screen.buffers(rows)
 
     def match_screened(
@@ -229,6 +311,7 @@ class NonParametricSampler:
         error : ndarray, shape (k,)
         accepted : ndarray of bool, shape (k,)
         """
+        assert self._screen is not None, "a sampler with allowed windows does not screen"
         choice, error, sure = self._screen.choose(windows, known, tolerance, uniforms, screen, rows, accept)
         if not sure:
             source, error = self.match(windows, known, tolerance, uniforms)
@@ -262,6 +345,7 @@ class NonParametricSampler:
         written : int
             Pixels filled.
         """
+        assert self._screen is not None, "a sampler with allowed windows does not screen"
         return self._screen.fill(
             canvas, filled, source, pixels, batches, screen, chunk_start, self.centres, tolerance, accept
         )

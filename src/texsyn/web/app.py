@@ -27,6 +27,7 @@ from pathlib import Path
 
 from fastapi import FastAPI, Request
 from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, Response, StreamingResponse
+from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from .. import data
 from .._validation import OneOf, Range
@@ -158,6 +159,11 @@ def create_app(settings: ServerSettings | None = None, folder: str | Path | None
     async def _upload_error(request: Request, exc: UploadError):
         return refusal(exc.status, str(exc))
 
+    @app.exception_handler(StarletteHTTPException)
+    async def _http_error(request: Request, exc: StarletteHTTPException):
+        messages = {404: "no such page or file", 405: "method not allowed here"}
+        return refusal(exc.status_code, messages.get(exc.status_code, str(exc.detail)))
+
     @app.exception_handler(InputError)
     async def _input_error(request: Request, exc: InputError):
         return refusal(422, str(exc))
@@ -229,7 +235,7 @@ def create_app(settings: ServerSettings | None = None, folder: str | Path | None
                 return refusal(413, f"the request is over {MAX_JSON_BYTES // 1024} KB")
         try:
             payload = json.loads(body.decode("utf-8"))
-        except (UnicodeDecodeError, ValueError):
+        except (UnicodeDecodeError, ValueError, RecursionError):  # RecursionError: nested too deep
             return refusal(400, "the request must be JSON")
         plan = await asyncio.to_thread(plan_job, payload, uploads().get, settings)
         try:
@@ -257,13 +263,13 @@ def create_app(settings: ServerSettings | None = None, folder: str | Path | None
             while True:
                 changed = job.changed
                 yield f"data: {json.dumps(job.public(query))}\n\n"
-                if job.state in FINAL_STATES:
+                if job.state in FINAL_STATES or state.get("stopping"):
                     return
                 try:
                     await asyncio.wait_for(changed.wait(), KEEP_ALIVE)
                 except TimeoutError:
                     yield ": keep-alive\n\n"
-                if await request.is_disconnected():
+                if state.get("stopping") or await request.is_disconnected():
                     return
 
         return StreamingResponse(
@@ -292,4 +298,13 @@ def create_app(settings: ServerSettings | None = None, folder: str | Path | None
         )
         return response
 
-    return RequestGuard(app, settings)
+    def end_streams() -> None:
+        """End every event stream: the server is stopping, and waits for open requests first."""
+        state["stopping"] = True
+        if "jobs" in state:
+            for job in jobs().jobs.values():
+                job.touch()
+
+    guard = RequestGuard(app, settings)
+    guard.end_streams = end_streams
+    return guard

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import html
 import json
 import os
 import secrets
@@ -50,6 +51,7 @@ class Job:
     progress: dict | None = None
     step: int = 0
     error: str | None = None
+    warning: str | None = None
     metrics: dict | None = None
     created: float = field(default_factory=time.monotonic)
     started: float | None = None
@@ -87,6 +89,7 @@ class Job:
             "step": self.step,
             "steps": len(self.plan.steps),
             "error": self.error,
+            "warning": self.warning,
             "seed": self.plan.seed,
             "command_line": self.plan.command_line,
             "exemplar": self.plan.exemplar.public(),
@@ -222,11 +225,17 @@ class JobManager:
                 if job.cancel_requested:
                     self._finish(job, "cancelled")
                     return
+                problem = None
                 if code is None:
-                    self._finish(job, "failed", f"stopped after {self.timeout:g} s, the time limit of a job")
-                    return
-                if code != 0:
-                    self._finish(job, "failed", last_error or f"the job's process ended with status {code}")
+                    problem = f"stopped after {self.timeout:g} s, the time limit of a job"
+                elif code != 0:
+                    problem = last_error or f"the job's process ended with status {code}"
+                optional = job.plan.optional_from is not None and index >= job.plan.optional_from
+                if problem is not None and optional:  # the output is there: keep it, say what is missing
+                    job.warning = f"the output is ready, but measuring it failed: {problem}"
+                    break
+                if problem is not None:
+                    self._finish(job, "failed", problem)
                     return
                 self._collect(job)
             job.step = len(job.plan.steps)
@@ -293,6 +302,19 @@ class JobManager:
 
     def _collect(self, job: Job) -> None:
         """Read what the page shows of a finished job and write its run JSON."""
+        if job.plan.mode == "compare":  # the report names the user's file, not the server's copy
+            stored, name = job.plan.exemplar.argument, job.plan.exemplar.name
+            page, data = job.folder / "report.html", job.folder / "report.json"
+            if page.is_file():
+                page.write_text(
+                    page.read_text(encoding="utf-8").replace(stored, html.escape(name)), encoding="utf-8"
+                )
+            if data.is_file():
+                record = json.loads(data.read_text(encoding="utf-8"))
+                record.update(command_line=job.plan.command_line, exemplar_path=name)
+                if record.get("exemplar_name") == stored:
+                    record["exemplar_name"] = name
+                data.write_text(json.dumps(record, indent=2) + "\n", encoding="utf-8")
         metrics = job.folder / "metrics.json"
         if metrics.is_file():
             job.metrics = json.loads(metrics.read_text())

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 
 from ..errors import InputError
 from ..methods import METHODS, get_method
+from ..ops.canvas import default_output_shape
 from .settings import ServerSettings
 from .uploads import Exemplar
 
@@ -55,6 +56,9 @@ class JobPlan:
     seed: int | None
     request: dict
     files: dict[str, DownloadFile] = field(default_factory=dict)
+    #: the steps from this index on add to a finished result (measuring): their failure
+    #: leaves the job done, with a warning, and its output downloadable
+    optional_from: int | None = None
 
 
 def _fail(message: str) -> InputError:
@@ -74,9 +78,14 @@ def _show(value) -> str:
     return text if len(text) <= 40 else text[:37] + "..."
 
 
-def _size(value, settings: ServerSettings) -> tuple[int, int] | None:
-    """``[width, height]`` or ``None`` (the method's default: twice the exemplar)."""
+def _size(value, settings: ServerSettings, default: tuple[int, int]) -> tuple[int, int] | None:
+    """``[width, height]`` or ``None`` (the command's default, ``default`` as (height, width))."""
     if value is None:
+        if max(default) > settings.max_side:  # the largest side holds for the default too
+            raise _fail(
+                f"size: the default output ({default[1]}x{default[0]}) is over the largest side "
+                f"{settings.max_side}; give size [width, height] with sides in [8, {settings.max_side}]"
+            )
         return None
     if not isinstance(value, list) or len(value) != 2:
         raise _fail(f"size must be [width, height], got {_show(value)}")
@@ -154,7 +163,9 @@ def plan_job(request, exemplar_of, settings: ServerSettings) -> JobPlan:
     if not isinstance(exemplar_id, str) or len(exemplar_id) > MAX_TEXT:
         raise _fail("exemplar must be the id of an upload or builtin:NAME")
     exemplar = exemplar_of(exemplar_id)
-    size = _size(request.get("size"), settings)
+    own_shape = (exemplar.height, exemplar.width)
+    default = own_shape if mode == "animate" else default_output_shape(own_shape)
+    size = _size(request.get("size"), settings, default)
     size_args = ["--size", f"{size[0]}x{size[1]}"] if size else []
     shown_exemplar = exemplar.name if exemplar.id.startswith("builtin:") else shlex.quote(exemplar.name)
 
@@ -236,6 +247,7 @@ def plan_job(request, exemplar_of, settings: ServerSettings) -> JobPlan:
         seed,
         request,
     )
+    plan.optional_from = 1
     plan.files = {
         "image": DownloadFile("texture.png", f"{stem}.png", "image/png"),
         "map": DownloadFile("map.png", f"{stem}-map.png", "image/png", step=1),

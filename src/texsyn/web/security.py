@@ -17,6 +17,7 @@ need no token, but the Host check applies to them too.
 from __future__ import annotations
 
 import secrets
+from collections.abc import Callable
 
 from starlette.responses import JSONResponse, Response
 from starlette.types import ASGIApp, Receive, Scope, Send
@@ -69,6 +70,9 @@ class RequestGuard:
         self.public_prefixes = public_prefixes
         self.allowed_hosts = settings.allowed_hosts
         self.allowed_origins = frozenset(f"http://{host}" for host in self.allowed_hosts)
+        #: called by ``texsyn serve`` as the server stops, before it waits for open requests:
+        #: the application ends its event streams (set by :func:`texsyn.web.app.create_app`)
+        self.end_streams: Callable[[], None] = lambda: None
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] not in ("http", "websocket"):

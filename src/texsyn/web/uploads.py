@@ -128,6 +128,7 @@ class UploadStore:
         self.max_pixels = int(max_pixels)
         self.max_uploads = int(max_uploads)
         self.items: dict[str, Exemplar] = {}
+        self.arriving = 0  # uploads being received now
 
     def get(self, exemplar_id: str) -> Exemplar:
         """An upload or a built-in by its id; :class:`UploadError` (404) when unknown."""
@@ -171,10 +172,21 @@ class UploadStore:
         limit_mb = f"{self.max_bytes / 1e6:g} MB"
         if declared is not None and declared > self.max_bytes:
             raise UploadError(f"the file is {declared / 1e6:.1f} MB, over the {limit_mb} upload limit", 413)
-        if sum(1 for key in self.items if not key.startswith("builtin:")) >= self.max_uploads:
+        stored = sum(1 for key in self.items if not key.startswith("builtin:"))
+        if stored + self.arriving >= self.max_uploads:  # uploads under way count too
             raise UploadError(
                 f"this server keeps at most {self.max_uploads} uploads; restart it to start afresh", 507
             )
+        self.arriving += 1
+        try:
+            return await self._receive(chunks, client_name, limit_mb)
+        finally:
+            self.arriving -= 1
+
+    async def _receive(
+        self, chunks: AsyncIterator[bytes], client_name: str | None, limit_mb: str
+    ) -> Exemplar:
+        """Store the bytes under a server-made name, then check them (:meth:`receive`)."""
         upload_id = "u" + secrets.token_hex(8)
         part = self.folder / f"{upload_id}.part"
         size = 0

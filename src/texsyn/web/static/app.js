@@ -235,6 +235,7 @@ function finished(job) {
   q("cancel").disabled = true;
   if (job.state === "failed") { showError(job.error); return; }
   if (job.state === "done") render(job);
+  if (job.warning) showError(job.warning);
 }
 
 function setSource(node, url) {
