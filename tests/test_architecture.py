@@ -38,6 +38,7 @@ LAYERS: dict[str, int] = {
     "texsyn.persistence": 8,
     "texsyn.metrics": 8,
     "texsyn.editing": 8,
+    "texsyn.materials": 8,
     "texsyn.report": 9,
     "texsyn.web": 10,
     "texsyn.batch": 10,

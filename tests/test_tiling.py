@@ -186,3 +186,16 @@ def test_tileable_with_a_flow_is_a_usage_error(tmp_path, capsys):
     )
     assert code == 2 and "--tileable" in capsys.readouterr().err
     assert not (tmp_path / "o.png").exists()
+
+
+@pytest.mark.parametrize("name", ["quilting", "mslg"])
+def test_a_tileable_material_stays_in_register(name, brick):
+    """The guide's source map (replay) or the joint image carries the band to every image."""
+    from texsyn.materials import synthesize_stack
+
+    albedo = np.stack([brick, 0.8 * brick, 0.5 * brick], axis=-1)
+    height = 2.0 * brick  # in metres, outside [0, 1]: mapped to [0, 1] and back
+    result = synthesize_stack(albedo, [height], name, (96, 96), rng=0, tileable=True)
+    out_albedo, out_height = result.images
+    assert np.abs(out_height - 2.0 * out_albedo[..., 0]).max() < 1e-4
+    assert seam_strength(out_albedo) <= SEAM_LIMIT and seam_strength(out_height) <= SEAM_LIMIT

@@ -28,6 +28,7 @@ from .methods import (
 
 if TYPE_CHECKING:  # the names for type checkers; at run time ``__getattr__`` loads them
     from ._version import __version__
+    from .materials import StackResult, synthesize_stack
     from .methods import Frame, Modification
     from .persistence import load, save
 
@@ -40,6 +41,8 @@ __getattr__, __dir__ = lazy_exports(
         "__version__": "_version",
         "load": "persistence",
         "save": "persistence",
+        "StackResult": "materials",
+        "synthesize_stack": "materials",
     },
 )
 
@@ -58,7 +61,9 @@ __all__ = [
     "make_method",
     "modify",
     "save",
+    "StackResult",
     "synthesize",
+    "synthesize_stack",
 ]
 
 
@@ -75,8 +80,11 @@ def synthesize(
 
     Parameters
     ----------
-    exemplar : ndarray, shape (H, W) or (H, W, 3)
-        Float values in [0, 1] (uint8/uint16 are scaled).
+    exemplar : ndarray, shape (H, W), (H, W, 3), or with alpha (H, W, 2) or (H, W, 4)
+        Float values in [0, 1] (uint8/uint16 are scaled). An alpha channel is kept and
+        carried like the colour (:func:`synthesize_stack`, ``docs/materials.md``): along the
+        source map of copy-based methods, as a joint channel of the methods that synthesise
+        channels jointly; the other methods drop it with a warning.
     method : str
         A name of :data:`METHODS` (``texsyn methods`` lists them).
     shape : (int, int), optional
@@ -90,7 +98,8 @@ def synthesize(
 
     Returns
     -------
-    ndarray of float32 in [0, 1], same rank and channels as the exemplar.
+    ndarray of float32 in [0, 1], same rank and channels as the exemplar (alpha included
+    unless the method drops it).
 
     Examples
     --------
@@ -101,6 +110,12 @@ def synthesize(
     >>> bool((texture == synthesize(exemplar, "random_phase", shape=(48, 64), rng=0)).all())
     True
     """
+    arr = np.asarray(exemplar) if not isinstance(exemplar, str) else exemplar
+    if isinstance(arr, np.ndarray) and arr.ndim == 3 and arr.shape[2] in (2, 4):
+        from .materials import synthesize_stack
+
+        image = synthesize_stack(arr, (), method, shape, rng=rng, tileable=tileable, **params).images[0]
+        return np.clip(image, 0.0, 1.0).astype(np.float32)
     return make_method(method, **params).fit(exemplar).sample(shape, rng=rng, tileable=tileable)
 
 

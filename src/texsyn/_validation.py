@@ -86,11 +86,15 @@ def _fmt(x: Any) -> str:
     return str(x)
 
 
-def as_exemplar(image: Any, *, name: str = "exemplar") -> np.ndarray:
+def as_exemplar(image: Any, *, name: str = "exemplar", max_channels: int = 3) -> np.ndarray:
     """Validate an exemplar array and return it as float64 ``(H, W)`` or ``(H, W, C)``.
 
     Accepts float arrays with values in [0, 1] and uint8/uint16 arrays (scaled to [0, 1]).
-    A fourth (alpha) channel is dropped with a warning; a single channel is squeezed.
+    With ``max_channels=3`` (methods that synthesise grey or colour only), a fourth (alpha)
+    channel, or the second of grey + alpha, is dropped with a warning (``texsyn.synthesize``
+    and ``texsyn synth`` keep it: ``docs/materials.md``); a method that synthesises ``C``
+    channels jointly (its ``max_channels``) takes any ``C`` up to it. A single channel is
+    squeezed.
 
     Raises
     ------
@@ -122,17 +126,22 @@ def as_exemplar(image: Any, *, name: str = "exemplar") -> np.ndarray:
         )
     else:
         raise InputTypeError(f"{name} must be an array of numbers, got dtype {arr.dtype}")
-    if arr.ndim == 3 and arr.shape[2] in (2, 4):
+    if arr.ndim == 3 and arr.shape[2] in (2, 4) and max_channels <= 3:
         if np.any(arr[..., -1] < 1.0):
             warnings.warn(
-                f"{name} has a transparency channel; it is dropped (texsyn synthesises colour or grey only)",
+                f"{name} has a transparency channel; this method synthesises colour or grey only, "
+                "so it is dropped (texsyn.synthesize keeps it: docs/materials.md)",
                 UserWarning,
                 stacklevel=3,
             )
         arr = arr[..., :-1]
     if arr.ndim == 3 and arr.shape[2] == 1:
         arr = arr[..., 0]
-    if arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[2] != 3):
+    if max_channels > 3 and arr.ndim == 3 and not 2 <= arr.shape[2] <= max_channels:
+        raise InputError(
+            f"{name} must have shape (H, W) or (H, W, C) with C from 2 to {max_channels}, got shape {tuple(arr.shape)}"
+        )
+    if arr.ndim not in (2, 3) or (arr.ndim == 3 and max_channels <= 3 and arr.shape[2] != 3):
         raise InputError(f"{name} must have shape (H, W) or (H, W, 3), got shape {tuple(arr.shape)}")
     if arr.shape[0] < 2 or arr.shape[1] < 2:
         raise InputError(f"{name} is {arr.shape[1]}x{arr.shape[0]} pixels; at least 2x2 is needed")

@@ -72,18 +72,35 @@ def write_texture(
     return result
 
 
-def stream_bands(outputs, synthesizer, shape, seed, bar, exemplar_shape, out_path, map_path, depth) -> None:
+def stream_bands(
+    outputs,
+    synthesizer,
+    shape,
+    seed,
+    bar,
+    exemplar_shape,
+    out_path,
+    map_path,
+    depth,
+    *,
+    store=None,
+    icc_profile: bytes | None = None,
+) -> None:
     """Write the bands of :meth:`~texsyn.methods.TextureSynthesizer.sample_rows` to the image
-    and source map files as they come: the float output is never held whole."""
+    and source map files as they come: the float output is never held whole. ``store``
+    turns a band into the values the file keeps (``texsyn synth``'s value range and linear
+    light, ``docs/materials.md``); ``icc_profile`` is embedded in the image."""
     channels = () if len(exemplar_shape) == 2 else (exemplar_shape[2],)
-    image_rows = outputs.open_rows(out_path, tuple(shape) + channels, bit_depth=depth)
+    image_rows = outputs.open_rows(
+        out_path, tuple(shape) + channels, bit_depth=depth, icc_profile=icc_profile
+    )
     map_rows = None
     npy = False
     if map_path is not None:
         npy = map_path.suffix.lower() == ".npy"
         map_rows = outputs.open_rows(map_path, tuple(shape) + ((2,) if npy else (3,)), dtype=np.int32)
     for band in synthesizer.sample_rows(shape, rng=seed, callback=bar):
-        image_rows.write(band.image)
+        image_rows.write(band.image if store is None else store(band.image))
         if map_rows is not None:
             source = band.source_map
             map_rows.write(source if npy else position_colors(source, exemplar_shape[:2]))

@@ -72,6 +72,7 @@ class Terminated(BaseException):
 #: each command and the name of its function, in the order ``texsyn --help`` lists them
 COMMANDS = {
     "synth": "synth",
+    "replay": "replay_command",
     "modify": "modify",
     "animate": "animate",
     "fill": "fill_command",
@@ -87,6 +88,7 @@ _command_function, _ = lazy_exports(
     __package__ or "",
     {
         "synth": "synthesis",
+        "replay_command": "replaying",
         "modify": "modification",
         "animate": "animation",
         "fill_command": "editing",

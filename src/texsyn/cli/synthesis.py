@@ -19,24 +19,33 @@ from ..io.writing import JSON_FORMATS
 from ..methods import METHODS, SynthesisResult, get_method, make_method
 from ..ops import position_colors
 from ..ops.canvas import default_output_shape, prepare_exemplar
+from ..ops.materials import LayerEncoding
 from .common import (
     check_memory_before_reading,
     claim_extra,
     done,
     draw_seed,
     input_path,
-    load_exemplar,
     output_set,
     read_flow,
     sidecar_json,
     stage_extra,
+)
+from .materials import (
+    claimed_depth,
+    depth_name,
+    plan_exemplar,
+    read_exemplar,
+    resolve_depth,
+    synth_bit_depth_option,
+    synth_material,
+    to_stored,
 )
 from .options import (
     BUILTIN_PREFIX,
     MAX_SIDE,
     SIZE,
     Number,
-    bit_depth_option,
     output_option,
     overwrite_option,
     param_option,
@@ -51,7 +60,7 @@ __all__ = ["stream_bands", "synth"]
 
 @click.command()
 @click.argument("exemplar", required=False)
-@output_option("Output image (.png, .jpg, .tif).")
+@output_option("Output image (.png, .jpg, .tif, .npy, .exr), or a folder with --with.")
 @click.option(
     "-m", "--method", default="quilting", show_default=True, help="Synthesis method (see `texsyn methods`)."
 )
@@ -80,7 +89,28 @@ __all__ = ["stream_bands", "synth"]
     metavar="N",
     help="Shrink EXEMPLAR (after --exemplar-crop) so that its longer side is at most N pixels.",
 )
-@bit_depth_option
+@synth_bit_depth_option
+@click.option(
+    "--linear",
+    is_flag=True,
+    help="Synthesise the colour in linear light: sRGB-decoded before, encoded after [default: the stored values].",
+)
+@click.option(
+    "--with",
+    "with_images",
+    multiple=True,
+    type=click.Path(dir_okay=False),
+    metavar="IMAGE",
+    help="Another image of the material (normal, height, roughness...), carried in register; -o is then a folder (repeatable; docs/materials.md).",
+)
+@click.option(
+    "--with-normal",
+    "with_normals",
+    multiple=True,
+    type=click.Path(dir_okay=False),
+    metavar="IMAGE",
+    help="A normal map of the material, renormalised to unit length (repeatable; --with takes names with 'normal' as normal maps too).",
+)
 @click.option(
     "--flow",
     "flow_file",
@@ -121,6 +151,9 @@ def synth(
     exemplar_crop,
     exemplar_max_side,
     bit_depth,
+    linear,
+    with_images,
+    with_normals,
     flow_file,
     guide_source,
     guide_target,
@@ -132,11 +165,11 @@ def synth(
     """Synthesise a texture from EXEMPLAR (an image file, or builtin:brick|grass|gravel).
 
     Without EXEMPLAR, the built-in brick texture is used. Also writes OUTPUT.json.
+    With --with images (a material), OUTPUT is a folder receiving one file per image.
     """
     if size is not None and scale is not None:
         raise click.UsageError("give either --size or --scale, not both")
     cls = get_method(method)
-    depth = int(bit_depth)
     parameters = parse_params(method, params)
     synthesizer = make_method(method, **parameters)
     if source_map is not None and not cls.has_source_map:
@@ -157,21 +190,50 @@ def synth(
     elif guide_weight is not None:
         raise click.UsageError("--guide-weight needs --guide-source and --guide-target")
     guide_weight = 1.0 if guide_weight is None else guide_weight
+    preparation = {"crop": exemplar_crop, "max_side": exemplar_max_side}
+    material = {
+        "exemplar": exemplar,
+        "output": output,
+        "method": method,
+        "synthesizer": synthesizer,
+        "parameters": parameters,
+        "size": size,
+        "scale": scale,
+        "seed": seed,
+        "source_map": source_map,
+        "preparation": preparation,
+        "bit_depth": bit_depth,
+        "linear": linear,
+        "with_images": with_images,
+        "with_normals": with_normals,
+        "overwrite": overwrite,
+        "quiet": quiet,
+        "tileable": tileable,
+    }
+    if with_images or with_normals:  # a material: -o is a folder (docs/materials.md)
+        if flow_file is not None or guided:
+            raise click.UsageError("--flow and --guide-* synthesise one image; they take no --with images")
+        synth_material(**material)
+        return
     outputs = output_set(overwrite)
     outputs.add_input(input_path(exemplar), "exemplar")
     outputs.add_input(flow_file, "flow file")
     outputs.add_input(guide_source, "source guide")
     outputs.add_input(guide_target, "target guide")
-    out_path = outputs.claim(output, bit_depth=depth)
+    out_path = outputs.claim(output, bit_depth=claimed_depth(bit_depth, output))
     map_path = claim_extra(outputs, source_map, "source map")
     side_path = outputs.claim(sidecar_path(out_path), formats=JSON_FORMATS, what="sidecar")
+    plan = plan_exemplar(exemplar)
+    if plan.channels in (2, 4) and flow_file is None and not guided:  # alpha carried like colour
+        synth_material(**material)
+        return
+    depth = resolve_depth(bit_depth, plan.depth, out_path)
 
     flow = read_flow(flow_file) if flow_file is not None else None
     guides = read_guides(guide_source, guide_target, exemplar_crop, exemplar_max_side) if guided else None
     if guides is not None:
         size = guides[1].shape[:2]
     streaming = flow is None and guides is None and not tileable and synthesizer.streams_rows
-    preparation = {"crop": exemplar_crop, "max_side": exemplar_max_side}
     check_memory_before_reading(
         synthesizer,
         exemplar,
@@ -180,8 +242,9 @@ def synth(
         streaming=streaming,
         preparation=preparation,
     )
-    image, label = load_exemplar(exemplar)
-    image = prepare_exemplar(image, **preparation)
+    found, label = read_exemplar(exemplar, preparation)
+    encoding = LayerEncoding.of(found.pixels, linear=linear)
+    image = found.pixels if encoding.is_identity else encoding.to_unit(found.pixels)
     if guides is not None:
         check_guide_sizes(guides[0], image, guide_source, exemplar)
     if flow is not None:
@@ -199,7 +262,9 @@ def synth(
         shape = default_output_shape(image.shape)
     seed, drawn = draw_seed(seed)
     h, w = shape
-    options = {"size": [w, h], "bit_depth": depth}
+    options = {"size": [w, h], "bit_depth": depth_name(depth), "linear": linear}
+    if encoding.low != 0.0 or encoding.high != 1.0:
+        options["value_range"] = [encoding.low, encoding.high]
     if exemplar_crop is not None:
         options["exemplar_crop"] = [exemplar_crop[1], exemplar_crop[0]]
     if exemplar_max_side is not None:
@@ -223,7 +288,19 @@ def synth(
         synthesizer.fit(image)
         if streaming:  # rows go to the files as the method finishes them (docs/performance.md)
             with outputs:
-                stream_bands(outputs, synthesizer, shape, seed, bar, image.shape, out_path, map_path, depth)
+                stream_bands(
+                    outputs,
+                    synthesizer,
+                    shape,
+                    seed,
+                    bar,
+                    image.shape,
+                    out_path,
+                    map_path,
+                    depth,
+                    store=lambda rows: to_stored(rows, encoding, depth),
+                    icc_profile=found.icc_profile,
+                )
                 outputs.write_text(
                     side_path, sidecar_json("synth", params=synthesizer.get_params(), **sidecar_args)
                 )
@@ -241,7 +318,12 @@ def synth(
                 "synth", params=synthesizer.get_params(), diagnostics=result.diagnostics, **sidecar_args
             )
             with outputs:
-                outputs.write_image(out_path, result.image, bit_depth=depth)
+                outputs.write_image(
+                    out_path,
+                    to_stored(result.image, encoding, depth),
+                    bit_depth=depth,
+                    icc_profile=found.icc_profile,
+                )
                 stage_extra(
                     outputs, map_path, result.source_map, lambda m: position_colors(m, image.shape[:2])
                 )

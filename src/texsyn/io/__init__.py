@@ -1,9 +1,10 @@
 """Reading and writing images: files in, float32 [0, 1] arrays out, atomic writes.
 
-Read: PNG, JPEG, TIFF, BMP, GIF (first frame), WebP, PBM/PGM/PPM; 8 and 16 bit; grey, grey +
-alpha, RGB, RGBA and palette images. Write: PNG, JPEG and TIFF (8 bit; 16 bit for PNG and
-TIFF on request), always through a temporary file renamed into place, so that a failed or
-interrupted write never leaves a partial file.
+Read: PNG, JPEG, TIFF, BMP, GIF (first frame), WebP, PBM/PGM/PPM, ``.npy`` and OpenEXR; 8
+and 16 bit and floating point; grey, grey + alpha, RGB, RGBA and palette images. Write: PNG,
+JPEG and TIFF (8 bit; 16 bit for PNG and TIFF on request; 32-bit float TIFF), ``.npy`` and
+OpenEXR (float), with an ICC profile on request, always through a temporary file renamed
+into place, so that a failed or interrupted write never leaves a partial file.
 
 ``save_fitted`` and ``load_fitted`` (texsyn 0.1) still resolve, with a
 :class:`DeprecationWarning`, through the module ``__getattr__`` below: fitted models are
@@ -16,7 +17,7 @@ import warnings
 
 from ..errors import ImageReadError
 from .headers import ImageHeader, check_image_size, max_image_pixels, read_image_header
-from .reading import READ_FORMATS, read_image
+from .reading import READ_FORMATS, ImageFile, read_image, read_image_file
 from .writing import (
     WRITE_FORMATS,
     OutputSet,
@@ -33,6 +34,8 @@ __all__ = [
     "READ_FORMATS",
     "WRITE_FORMATS",
     "read_image",
+    "read_image_file",
+    "ImageFile",
     "read_image_header",
     "ImageHeader",
     "check_image_size",

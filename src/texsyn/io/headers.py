@@ -43,6 +43,7 @@ from .budget import (
     max_image_pixels,
 )
 from .files import library_said, open_checked, read_error
+from .float_formats import EXR_MAGIC, NPY_MAGIC, exr_header, npy_header
 from .libraries import PILLOW_FORMATS, mode_bits, pillow, pillow_open, pillow_target
 from .probes import (  # noqa: F401
     PNM_MAGIC,
@@ -69,7 +70,7 @@ __all__ = [
     "read_image_header",
 ]
 
-_FORMAT_NAMES = "PNG, JPEG, TIFF, BMP, GIF, WebP, PNM (PBM/PGM/PPM)"
+_FORMAT_NAMES = "PNG, JPEG, TIFF, BMP, GIF, WebP, PNM (PBM/PGM/PPM), .npy, OpenEXR"
 
 
 def read_image_header(path: str | os.PathLike) -> ImageHeader:
@@ -138,6 +139,10 @@ def _probe_open(fh: BinaryIO, size: int, path: str | os.PathLike) -> Probe:
     if size == 0:
         raise read_error(path, "the file is empty (0 bytes)")
     head = fh.read(16)
+    if head.startswith(NPY_MAGIC):  # an array of samples (docs/materials.md)
+        return Probe(npy_header(path), "npy")
+    if head.startswith(EXR_MAGIC):
+        return Probe(exr_header(path), "exr")
     if PNM_MAGIC.match(head):
         return probe_pnm(fh, size, path)
     Image = pillow()

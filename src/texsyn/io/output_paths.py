@@ -49,7 +49,16 @@ __all__ = [
     "write_error",
 ]
 
-WRITE_FORMATS = {".png": (8, 16), ".jpg": (8,), ".jpeg": (8,), ".tif": (8, 16), ".tiff": (8, 16)}
+#: image formats and their bit depths (32: float samples; docs/materials.md)
+WRITE_FORMATS = {
+    ".png": (8, 16),
+    ".jpg": (8,),
+    ".jpeg": (8,),
+    ".tif": (8, 16, 32),
+    ".tiff": (8, 16, 32),
+    ".npy": (8, 16, 32),
+    ".exr": (32,),
+}
 ARRAY_FORMATS = {".npy": (8,)}
 JSON_FORMATS = {".json": (8,)}
 VIDEO_FORMATS = {".mp4": (8,), ".webm": (8,), ".gif": (8,)}
@@ -89,10 +98,9 @@ def check_format(p: Path, formats: dict, bit_depth: int) -> None:
         )
     depths = formats[suffix]
     if bit_depth not in depths:
-        raise OutputPathError(
-            f"cannot write '{p}' with {bit_depth}-bit depth; {suffix} allows "
-            f"{' or '.join(str(d) for d in depths)} bit"
-        )
+        named = [f"{d}-bit float" if d == 32 else f"{d}-bit" for d in depths]
+        said = "32-bit float" if bit_depth == 32 else f"{bit_depth}-bit"
+        raise OutputPathError(f"cannot write '{p}' with {said} depth; {suffix} allows {' or '.join(named)}")
 
 
 def check_folder(p: Path) -> None:

@@ -38,7 +38,8 @@ _MAX_PNM_HEADER = 64 * 1024
 class Probe:
     """A header, plus how to decode the file and what the decoder must check.
 
-    ``decoder`` is ``"pillow"``, ``"pypng"``, ``"tifffile"`` or ``"numpy"`` (raw PNM);
+    ``decoder`` is ``"pillow"``, ``"pypng"``, ``"tifffile"``, ``"numpy"`` (raw PNM), ``"npy"``
+    or ``"exr"`` (:mod:`texsyn.io.float_formats`);
     ``mode`` and ``target`` are Pillow's mode at open and the mode to decode to (``None``
     where Pillow did not open the file); ``details`` holds what the guards need.
     """

@@ -1,8 +1,11 @@
 """Reading image files: float32 [0, 1] arrays out, header first, never a hang or a bomb.
 
 Read: PNG (1-16 bit, grey, grey + alpha, RGB, RGBA, palette), JPEG (grey, RGB, CMYK),
-TIFF (1-16 bit integer, 32/64 bit float), BMP, GIF (first frame), WebP and PNM (PBM, PGM,
-PPM, plain and raw, maxval up to 65535).
+TIFF (1-16 bit integer, 32/64 bit float), BMP, GIF (first frame), WebP, PNM (PBM, PGM,
+PPM, plain and raw, maxval up to 65535), ``.npy`` arrays and OpenEXR (with the ``OpenEXR``
+package). :func:`read_image` gives float32 in [0, 1]; :func:`read_image_file` gives the
+samples at their stored scale (floats of any range), with the file's bit depth and ICC
+profile, for the material pipeline (``docs/materials.md``).
 
 Every read follows the same steps (``docs/reading.md``):
 
@@ -23,6 +26,7 @@ from __future__ import annotations
 
 import os
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -37,10 +41,12 @@ from .decoders import (
     decode_tifffile,
     undo_pnm_rescale,
 )
-from .files import library_said, read_error
+from .files import library_said, open_checked, read_error
+from .float_formats import decode_exr, decode_npy_image
 from .headers import Probe, probe
+from .libraries import pillow_open
 
-__all__ = ["READ_FORMATS", "read_image"]
+__all__ = ["READ_FORMATS", "ImageFile", "read_image", "read_image_file"]
 
 READ_FORMATS = (
     ".png",
@@ -55,6 +61,8 @@ READ_FORMATS = (
     ".ppm",
     ".pnm",
     ".pbm",
+    ".npy",
+    ".exr",
 )
 
 
@@ -92,6 +100,78 @@ def read_image(path: str | os.PathLike, *, keep_alpha: bool = False) -> np.ndarr
     InputError
         ``TEXSYN_MAX_PIXELS`` holds a value that is not a positive number of pixels.
     """
+    _, data, scale = _read_samples(path)
+    return _to_float(data, scale, path, keep_alpha)
+
+
+@dataclass(frozen=True)
+class ImageFile:
+    """An image file's samples as stored, with what the material pipeline keeps of the file.
+
+    Attributes
+    ----------
+    pixels : ndarray of float32, shape (H, W) or (H, W, C), C from 2 to 4
+        Integer samples divided by the largest value of their bit depth (as
+        :func:`read_image`); floating-point samples as stored, any finite range. Alpha is kept.
+    bit_depth : int
+        8, 16 (integer samples: 1-8 bit and 9-16 bit files) or 32 (floating point, the
+        ``32f`` of the command line; half-float EXR and 64-bit data included).
+    format : str
+        ``'PNG'``, ``'JPEG'``, ``'TIFF'``, ``'NPY'``, ``'EXR'``...
+    icc_profile : bytes or None
+        The embedded ICC colour profile (PNG ``iCCP``, JPEG ``APP2``, TIFF tag 34675, WebP).
+    """
+
+    pixels: np.ndarray
+    bit_depth: int
+    format: str
+    icc_profile: bytes | None = None
+
+    @property
+    def is_float(self) -> bool:
+        return self.bit_depth == 32
+
+
+def read_image_file(path: str | os.PathLike) -> ImageFile:
+    """Read an image file keeping its alpha, bit depth, floating-point range and ICC profile.
+
+    The same header-first read as :func:`read_image` (``docs/reading.md``); what differs is
+    the result (``docs/materials.md``): float samples keep their values, whatever their range
+    (non-finite values are refused), and the alpha channel is kept.
+
+    Parameters
+    ----------
+    path : str or path-like
+        Any file :func:`read_image` reads, ``.npy`` and OpenEXR included.
+
+    Returns
+    -------
+    ImageFile
+
+    Raises
+    ------
+    ImageReadError, ImageTooLargeError, FileNotFoundError, InputError
+        As :func:`read_image`.
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> folder = tempfile.TemporaryDirectory()
+    >>> path = os.path.join(folder.name, "height.npy")
+    >>> np.save(path, np.linspace(-2.0, 3.0, 12, dtype=np.float32).reshape(3, 4))
+    >>> found = read_image_file(path)
+    >>> found.bit_depth, found.format, float(found.pixels.min()), float(found.pixels.max())
+    (32, 'NPY', -2.0, 3.0)
+    >>> folder.cleanup()
+    """
+    found, data, scale = _read_samples(path)
+    depth = _stored_depth(data, scale, found)
+    pixels = _to_float(data, scale, path, keep_alpha=True, any_range=True)
+    return ImageFile(pixels, depth, found.header.format, _icc_profile(path, found))
+
+
+def _read_samples(path: str | os.PathLike) -> tuple[Probe, np.ndarray, float]:
+    """Header, budget, then the decoder: the samples as stored and the value that means 1.0."""
     found = probe(path)
     check_image_size(found.header, path, max_pixels=max_image_pixels(), file_size=os.path.getsize(path))
     try:
@@ -104,7 +184,34 @@ def read_image(path: str | os.PathLike, *, keep_alpha: bool = False) -> np.ndarr
         raise read_error(path, "not enough memory to decode it (lower TEXSYN_MAX_PIXELS)") from None
     except Exception as exc:  # every decoder failure, whatever its type, is an ImageReadError
         raise read_error(path, _complaint(exc, found, path)) from None
-    return _to_float(data, scale, path, keep_alpha)
+    return found, data, scale
+
+
+def _stored_depth(data: np.ndarray, scale: float, found: Probe) -> int:
+    """8, 16 or 32 (float): the bit depth an output keeps by default (``docs/materials.md``)."""
+    if data.dtype.kind == "f":
+        return 32
+    return 8 if data.dtype == bool or scale <= 255.0 else 16
+
+
+def _icc_profile(path: str | os.PathLike, found: Probe) -> bytes | None:
+    """The embedded ICC profile, read from the header (Pillow's lazy open, or tifffile's tags)."""
+    fmt = found.header.format
+    if fmt not in ("PNG", "JPEG", "TIFF", "WEBP"):
+        return None
+    try:
+        if found.decoder == "tifffile":
+            import tifffile
+
+            with tifffile.TiffFile(path) as tif:
+                icc = tif.pages.first.iccprofile
+        else:
+            fh, _ = open_checked(path)
+            with fh, pillow_open(fh, fmt, path) as im:
+                icc = im.info.get("icc_profile")
+    except Exception:  # a profile that cannot be read is not kept; the pixels were read
+        return None
+    return bytes(icc) if icc else None
 
 
 #: What Pillow's plain PNM decoder says -> the same problem in texsyn's PNM messages.
@@ -134,6 +241,10 @@ def _decode(path: str | os.PathLike, found: Probe) -> tuple[np.ndarray, float]:
         return decode_tifffile(path, found.header)
     if found.decoder == "numpy":
         return decode_raw_pnm(path, found)
+    if found.decoder == "npy":
+        return decode_npy_image(path)
+    if found.decoder == "exr":
+        return decode_exr(path, found.header)
     arr = decode_pillow(path, found)
     if found.header.format == "PNM" and arr.dtype != bool:
         return undo_pnm_rescale(arr, found.details["maxval"])
@@ -155,8 +266,11 @@ def _decode(path: str | os.PathLike, found: Probe) -> tuple[np.ndarray, float]:
 # --------------------------------------------------------------------------- to float
 
 
-def _to_float(arr: np.ndarray, scale: float, path: str | os.PathLike, keep_alpha: bool) -> np.ndarray:
-    """Integer (or float) samples to float32 in [0, 1], alpha handled on the integer data."""
+def _to_float(
+    arr: np.ndarray, scale: float, path: str | os.PathLike, keep_alpha: bool, *, any_range: bool = False
+) -> np.ndarray:
+    """Integer (or float) samples to float32 in [0, 1], alpha handled on the integer data;
+    with ``any_range``, float samples keep their values (finite ones only)."""
     if arr.ndim == 3 and arr.shape[2] == 1:
         arr = arr[..., 0]
     if arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[2] not in (2, 3, 4)):
@@ -164,8 +278,13 @@ def _to_float(arr: np.ndarray, scale: float, path: str | os.PathLike, keep_alpha
     if arr.shape[0] == 0 or arr.shape[1] == 0:
         raise read_error(path, "it is an empty image")
     if arr.dtype.kind == "f":
-        if arr.size and (not np.all(np.isfinite(arr)) or arr.min() < 0 or arr.max() > 1):
-            raise read_error(path, "it holds floating-point values outside [0, 1]")
+        if arr.size and not np.all(np.isfinite(arr)):
+            raise read_error(path, "it holds NaN or infinite values")
+        if arr.size and not any_range and (arr.min() < 0 or arr.max() > 1):
+            raise read_error(
+                path,
+                "it holds floating-point values outside [0, 1] (texsyn synth reads them: docs/materials.md)",
+            )
         scale = 1.0
     if arr.ndim == 3 and arr.shape[2] in (2, 4) and not keep_alpha:
         opaque = True if arr.dtype == bool else scale

@@ -6,15 +6,17 @@ top to bottom, and closes it. What each format allows (``docs/performance.md``, 
 bounded memory"):
 
 - PNG: rows are filtered and deflated as they arrive (:class:`PngRows`). The file is a plain
-  PNG (ISO/IEC 15948): signature, ``IHDR``, ``IDAT`` chunks of at most 1 MiB, ``IEND``; each
+  PNG (ISO/IEC 15948): signature, ``IHDR``, an ``iCCP`` chunk when an ICC profile is given
+  (section 11.3.3.3), ``IDAT`` chunks of at most 1 MiB, ``IEND``; each
   row takes the filter (None, Sub, Up, Average or Paeth, section 9) whose output has the
   smallest sum of absolute values, the heuristic the PNG specification recommends (section
   12.8), and zlib level 6.
-- TIFF: tifffile writes the header of an uncompressed image and says where its pixels go;
-  the rows are written there (:class:`TiffRows`).
-- ``.npy``: the array header, then the rows (:class:`NpyRows`).
-- JPEG: the format codes 8x8 blocks of a whole image; the rows are kept as 8-bit (a quarter
-  of float32) and encoded at the end (:class:`BufferedRows`).
+- TIFF: tifffile writes the header of an uncompressed image (8, 16 bit or 32-bit float, its
+  ICC profile) and says where its pixels go; the rows are written there (:class:`TiffRows`).
+- ``.npy``: the array header, then the rows (:class:`NpyRows`; an image's samples as
+  :func:`~texsyn.io.encoders.image_data` makes them, :class:`NpyImageRows`).
+- JPEG and OpenEXR: the formats code blocks of a whole image; the rows are kept as 8-bit (a
+  quarter of float32) or float32 samples and encoded at the end (:class:`BufferedRows`).
 """
 
 from __future__ import annotations
@@ -28,12 +30,21 @@ from typing import BinaryIO, TypeVar
 import numpy as np
 
 from ..errors import InputError
-from .encoders import encode_image, image_data
+from .encoders import FLOAT_DEPTH, encode_image, iccp_data, image_data, tiff_layout
 from .output_paths import fsync_path, write_error
 
 T = TypeVar("T")
 
-__all__ = ["BufferedRows", "NpyRows", "PngRows", "RowWriter", "StagedRows", "TiffRows", "open_row_writer"]
+__all__ = [
+    "BufferedRows",
+    "NpyImageRows",
+    "NpyRows",
+    "PngRows",
+    "RowWriter",
+    "StagedRows",
+    "TiffRows",
+    "open_row_writer",
+]
 
 #: PNG signature (ISO/IEC 15948, section 5.2)
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -102,14 +113,17 @@ class _ImageRows(RowWriter):
 
 
 class PngRows(_ImageRows):
-    """A PNG written as its rows arrive (module docstring); 8 or 16 bits, grey, RGB or RGBA."""
+    """A PNG written as its rows arrive (module docstring); 8 or 16 bits, grey, grey + alpha,
+    RGB or RGBA, with an ICC profile when one is given."""
 
-    def __init__(self, path: Path, shape: tuple[int, ...], bit_depth: int) -> None:
+    def __init__(
+        self, path: Path, shape: tuple[int, ...], bit_depth: int, icc_profile: bytes | None = None
+    ) -> None:
         super().__init__(path, shape, bit_depth)
         channels = 1 if len(self.shape) == 2 else self.shape[2]
-        colour_type = 0 if channels == 1 else {3: 2, 4: 6}.get(channels)
-        if colour_type is None:
-            raise InputError(f"a PNG holds 1, 3 or 4 channels, got {channels}")
+        colour_type = 0 if channels == 1 else {2: 4, 3: 2, 4: 6}.get(channels)
+        if colour_type is None or bit_depth not in (8, 16):
+            raise InputError(f"a PNG holds 1 to 4 channels of 8 or 16 bits, got {channels} of {bit_depth}")
         self.pixel_bytes = channels * bit_depth // 8
         self._file: BinaryIO = open(self.path, "wb")  # closed in _close or abort
         self._deflate = zlib.compressobj(6)
@@ -119,6 +133,8 @@ class PngRows(_ImageRows):
         header = struct.pack(">IIBBBBB", width, height, bit_depth, colour_type, 0, 0, 0)
         self._file.write(PNG_SIGNATURE)
         self._chunk(b"IHDR", header)
+        if icc_profile:
+            self._chunk(b"iCCP", iccp_data(icc_profile))
 
     def _chunk(self, kind: bytes, data: bytes) -> None:
         self._file.write(struct.pack(">I", len(data)) + kind + data)
@@ -193,16 +209,18 @@ def filter_rows(raw: np.ndarray, previous: np.ndarray, pixel_bytes: int) -> np.n
 class TiffRows(_ImageRows):
     """An uncompressed TIFF: tifffile writes the header, the rows go where it says."""
 
-    def __init__(self, path: Path, shape: tuple[int, ...], bit_depth: int) -> None:
+    def __init__(
+        self, path: Path, shape: tuple[int, ...], bit_depth: int, icc_profile: bytes | None = None
+    ) -> None:
         super().__init__(path, shape, bit_depth)
         import tifffile
 
-        dtype = np.uint16 if bit_depth == 16 else np.uint8
-        photometric = "minisblack" if len(self.shape) == 2 else "rgb"
+        dtype = {16: np.uint16, FLOAT_DEPTH: np.float32}.get(bit_depth, np.uint8)
+        layout = tiff_layout(1 if len(self.shape) == 2 else self.shape[2])
+        if icc_profile:
+            layout["iccprofile"] = icc_profile
         with tifffile.TiffWriter(self.path) as tiff:
-            where = tiff.write(
-                None, shape=self.shape, dtype=dtype, photometric=photometric, returnoffset=True
-            )
+            where = tiff.write(None, shape=self.shape, dtype=dtype, returnoffset=True, **layout)
         if where is None:  # pragma: no cover - tifffile gives it for an uncompressed contiguous image
             raise OSError(f"tifffile gave no data offset for '{self.path}'")
         offset = where[0]
@@ -246,19 +264,51 @@ class NpyRows(RowWriter):
         self._file.close()
 
 
-class BufferedRows(_ImageRows):
-    """Rows kept as integer samples and encoded whole at the end (JPEG)."""
+class NpyImageRows(_ImageRows):
+    """An ``.npy`` image: uint8, uint16 or float32 samples (``bit_depth``), row band by row band."""
 
-    def __init__(self, path: Path, shape: tuple[int, ...], bit_depth: int, suffix: str) -> None:
+    def __init__(self, path: Path, shape: tuple[int, ...], bit_depth: int) -> None:
+        super().__init__(path, shape, bit_depth)
+        dtype = np.dtype({16: np.uint16, FLOAT_DEPTH: np.float32}.get(bit_depth, np.uint8))
+        self._file: BinaryIO = open(self.path, "wb")  # closed in _close or abort
+        header = {"descr": np.lib.format.dtype_to_descr(dtype), "fortran_order": False, "shape": self.shape}
+        np.lib.format.write_array_header_1_0(self._file, header)
+
+    def _write(self, data: np.ndarray) -> None:
+        self._file.write(np.ascontiguousarray(data).tobytes())
+
+    def _close(self) -> None:
+        self._file.close()
+
+    def abort(self) -> None:
+        self._file.close()
+
+
+class BufferedRows(_ImageRows):
+    """Rows kept as samples and encoded whole at the end (JPEG, OpenEXR)."""
+
+    def __init__(
+        self,
+        path: Path,
+        shape: tuple[int, ...],
+        bit_depth: int,
+        suffix: str,
+        icc_profile: bytes | None = None,
+    ) -> None:
         super().__init__(path, shape, bit_depth)
         self.suffix = suffix
-        self._data = np.empty(self.shape, dtype=np.uint16 if bit_depth == 16 else np.uint8)
+        self.icc_profile = icc_profile
+        dtype = {16: np.uint16, FLOAT_DEPTH: np.float32}.get(bit_depth, np.uint8)
+        self._data = np.empty(self.shape, dtype=dtype)
 
     def _write(self, data: np.ndarray) -> None:
         self._data[self.rows_written : self.rows_written + data.shape[0]] = data
 
     def _close(self) -> None:
-        encode_image(self.path, self._data, self.suffix)
+        if self.icc_profile is None:
+            encode_image(self.path, self._data, self.suffix)
+        else:
+            encode_image(self.path, self._data, self.suffix, self.icc_profile)
 
 
 def open_row_writer(
@@ -268,16 +318,19 @@ def open_row_writer(
     *,
     bit_depth: int = 8,
     dtype: np.dtype | type | None = None,
+    icc_profile: bytes | None = None,
 ) -> RowWriter:
     """The writer of an image of ``shape`` in the format of ``suffix`` (module docstring);
-    for ``.npy``, of an array of ``dtype`` (int32 by default)."""
+    for ``.npy``, of an array of ``dtype``, or without ``dtype`` of an image's samples."""
     if suffix == ".npy":
-        return NpyRows(path, shape, np.int32 if dtype is None else dtype)
+        if dtype is None:
+            return NpyImageRows(path, shape, bit_depth)
+        return NpyRows(path, shape, dtype)
     if suffix == ".png":
-        return PngRows(path, shape, bit_depth)
+        return PngRows(path, shape, bit_depth, icc_profile)
     if suffix in (".tif", ".tiff"):
-        return TiffRows(path, shape, bit_depth)
-    return BufferedRows(path, shape, bit_depth, suffix)
+        return TiffRows(path, shape, bit_depth, icc_profile)
+    return BufferedRows(path, shape, bit_depth, suffix, icc_profile)
 
 
 class StagedRows:

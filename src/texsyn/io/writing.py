@@ -7,8 +7,9 @@ first and renamed together only when every one of them is complete, so a failure
 disk, an error, Ctrl-C, SIGTERM) leaves neither a partial file nor the first outputs of a
 command whose later outputs failed.
 
-Write: PNG, JPEG and TIFF (8 bit; 16 bit for PNG and TIFF on request), ``.npy`` arrays,
-UTF-8 text (JSON sidecars, HTML reports), MP4, WebM and GIF videos and folders of PNG frames.
+Write: PNG, JPEG and TIFF (8 bit; 16 bit for PNG and TIFF on request; 32-bit float TIFF),
+``.npy`` images (uint8, uint16, float32) and OpenEXR (float), with the ICC profile given,
+``.npy`` arrays, UTF-8 text (JSON sidecars, HTML reports), MP4, WebM and GIF videos and folders of PNG frames.
 
 The path checks and file-system steps are in :mod:`texsyn.io.output_paths`, the encoders
 in :mod:`texsyn.io.encoders` and :mod:`texsyn.io.video`, the writers of outputs streamed
@@ -241,6 +242,7 @@ class OutputSet:
         *,
         bit_depth: int = 8,
         dtype: np.dtype | type | None = None,
+        icc_profile: bytes | None = None,
     ) -> StagedRows:
         """Stage an output written band by band (:mod:`texsyn.io.streaming`).
 
@@ -252,7 +254,12 @@ class OutputSet:
         shape : tuple
             ``(height, width)`` or ``(height, width, channels)`` of the whole output.
         bit_depth : int
-            Of an image.
+            Of an image (8, 16, or 32 for float samples).
+        dtype : dtype, optional
+            Of an ``.npy`` array (a source map); ``None`` for an ``.npy`` image (its samples
+            follow ``bit_depth``).
+        icc_profile : bytes, optional
+            Embedded in a PNG, TIFF or JPEG image.
 
         Returns
         -------
@@ -264,19 +271,31 @@ class OutputSet:
         tmp = self._temporary(target, False)
         staged = StagedRows(
             target,
-            lambda: open_row_writer(tmp, target.suffix.lower(), shape, bit_depth=bit_depth, dtype=dtype),
+            lambda: open_row_writer(
+                tmp, target.suffix.lower(), shape, bit_depth=bit_depth, dtype=dtype, icc_profile=icc_profile
+            ),
             discard=self.discard,
             closed=self._open_rows.remove,
         )
         self._open_rows.append(staged)
         return staged
 
-    def write_image(self, path: str | os.PathLike, image: np.ndarray, *, bit_depth: int = 8) -> Path:
-        """Stage a float image in [0, 1] (or uint8/uint16) as PNG, JPEG or TIFF."""
+    def write_image(
+        self,
+        path: str | os.PathLike,
+        image: np.ndarray,
+        *,
+        bit_depth: int = 8,
+        icc_profile: bytes | None = None,
+    ) -> Path:
+        """Stage a float image in [0, 1] (or uint8/uint16) as PNG, JPEG, TIFF, ``.npy`` or EXR;
+        with ``bit_depth=32`` float samples of any finite value (TIFF, ``.npy``, EXR)."""
         target = Path(path)
         data = image_data(image, bit_depth)
         suffix = target.suffix.lower()
-        return self.write(target, lambda tmp: _encode_image(tmp, data, suffix))
+        if icc_profile is None:  # the encoder as it was called before ICC profiles existed
+            return self.write(target, lambda tmp: _encode_image(tmp, data, suffix))
+        return self.write(target, lambda tmp: _encode_image(tmp, data, suffix, icc_profile))
 
     def write_array(self, path: str | os.PathLike, array: np.ndarray) -> Path:
         """Stage a NumPy array as ``.npy``."""
@@ -386,25 +405,33 @@ class OutputSet:
 
 # ---------------------------------------------------------------------------- one-file writers
 def write_image(
-    path: str | os.PathLike, image: np.ndarray, *, bit_depth: int = 8, overwrite: bool = True
+    path: str | os.PathLike,
+    image: np.ndarray,
+    *,
+    bit_depth: int = 8,
+    overwrite: bool = True,
+    icc_profile: bytes | None = None,
 ) -> Path:
-    """Write a float image in [0, 1] to PNG, JPEG or TIFF, atomically.
+    """Write a float image to PNG, JPEG, TIFF, ``.npy`` or OpenEXR, atomically.
 
     Parameters
     ----------
     path : str or path-like
         Its suffix chooses the format.
-    image : ndarray, shape (H, W) or (H, W, 3)
-        Values outside [0, 1] are rejected (not clipped silently).
-    bit_depth : {8, 16}
-        16 bit is allowed for PNG and TIFF.
+    image : ndarray, shape (H, W) or (H, W, C), C from 1 to 4
+        For 8 and 16 bits, values outside [0, 1] are rejected (not clipped silently).
+    bit_depth : {8, 16, 32}
+        16 bit is allowed for PNG, TIFF and ``.npy``; 32 (float samples, any finite values)
+        for TIFF, ``.npy`` and EXR (``docs/materials.md``).
     overwrite : bool
         Replace an existing file (default); ``False`` raises ``OutputExistsError``.
+    icc_profile : bytes, optional
+        An ICC colour profile to embed (PNG, JPEG, TIFF).
     """
     outputs = OutputSet(overwrite=overwrite)
     p = outputs.claim(path, bit_depth=bit_depth)
     with outputs:
-        outputs.write_image(p, image, bit_depth=bit_depth)
+        outputs.write_image(p, image, bit_depth=bit_depth, icc_profile=icc_profile)
     return p
 
 

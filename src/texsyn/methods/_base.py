@@ -49,8 +49,10 @@ class SynthesisResult:
 
     Attributes
     ----------
-    image : ndarray of float32, shape (H, W) or (H, W, 3)
-        Values clipped to [0, 1]; same rank and channels as the exemplar.
+    image : ndarray of float32, shape (H, W) or (H, W, C)
+        Values clipped to [0, 1]; same rank and channels as the exemplar (``C`` is 3, or up
+        to :attr:`TextureSynthesizer.max_channels` for a method that synthesises channels
+        jointly: ``docs/materials.md``).
     source_map : ndarray of int32, shape (H, W, 2), or None
         Exemplar ``(row, col)`` each output pixel was copied from; ``None`` for methods that
         do not copy pixels.
@@ -99,6 +101,10 @@ class TextureSynthesizer:
     deprecated_params: ClassVar[dict[str, str]] = {}
     reference: ClassVar[str] = ""
     has_source_map: ClassVar[bool] = False
+    #: the most channels ``fit`` takes: 3 (grey or colour; an alpha channel is dropped), or
+    #: more for a method whose statistics treat any number of channels jointly, so that a
+    #: material stack or an RGBA exemplar is synthesised as one image (``docs/materials.md``)
+    max_channels: ClassVar[int] = 3
     #: whether every output pixel equals the exemplar pixel its source map names
     source_map_exact: ClassVar[bool] = True
     #: rough working memory per pixel and channel, in bytes: the default of
@@ -371,7 +377,7 @@ class TextureSynthesizer:
         planned = planned_exemplar_shape(exemplar)
         if planned is not None:  # before the (float64) conversion of a large array
             self._check_memory(planned)
-        ex = as_exemplar(exemplar)
+        ex = as_exemplar(exemplar, max_channels=self.max_channels)
         side, why = self.min_exemplar_size()
         if min(ex.shape[:2]) < side:
             raise InputError(

@@ -18,7 +18,15 @@ import numpy as np
 
 from .quilting import Quilting
 
-__all__ = ["BAND_PATCH", "quilted_seam_band", "seam_band_width"]
+__all__ = ["BAND_PATCH", "BandQuilting", "quilted_seam_band", "seam_band_width"]
+
+
+class BandQuilting(Quilting):
+    """Image quilting of the seam band, on as many channels as the method synthesised jointly
+    (a material's images as channels of one image: ``docs/materials.md``); not registered."""
+
+    max_channels = 16
+
 
 #: side of the quilting blocks that fill the seam band (the quilting default), cut down to
 #: the output's and the exemplar's size
@@ -59,7 +67,7 @@ def quilted_seam_band(
     known = np.ones((height, width), dtype=bool)
     known[shift[0] - band // 2 : shift[0] + (band + 1) // 2, :] = False
     known[:, shift[1] - band // 2 : shift[1] + (band + 1) // 2] = False
-    filled = Quilting(patch_size=patch).fit(exemplar).fill(rolled, known, rng=rng)
+    filled = BandQuilting(patch_size=patch).fit(exemplar).fill(rolled, known, rng=rng)
     back = (-shift[0], -shift[1])
     out = np.roll(filled.image, back, axis=(0, 1))
     if source is None:

@@ -87,6 +87,8 @@ class _LocalGaussianBase(TextureSynthesizer):
     """Shared parameters, fit and sample of the single-scale models (LG, CLG, RCLG)."""
 
     has_source_map = False
+    #: channels are synthesised jointly: a material stack or an RGBA exemplar (docs/materials.md)
+    max_channels = 16
     #: only ``histogram='none'`` streams; the class itself says no (its default is ``'match'``)
     streams_rows = _StreamsWithoutMatching()  # type: ignore[assignment]
     memory_margin = CALIBRATED_MARGIN

@@ -66,6 +66,8 @@ class HeegerBergen(TextureSynthesizer):
     """
 
     name = "heeger_bergen"
+    #: channels are synthesised jointly: a material stack or an RGBA exemplar (docs/materials.md)
+    max_channels = 16
     memory_margin = CALIBRATED_MARGIN
     summary = "Heeger-Bergen steerable-pyramid histogram matching"
     reference = "Heeger, Bergen, SIGGRAPH 1995; Briand et al., IPOL 2014"

@@ -118,6 +118,8 @@ class MSLG(TextureSynthesizer):
     summary = "Multiscale locally Gaussian patch sampling"
     reference = "Raad, Desolneux, Morel, JMIV 2016 (MSLG)"
     has_source_map = False
+    #: channels are synthesised jointly: a material stack or an RGBA exemplar (docs/materials.md)
+    max_channels = 16
 
     def __init__(
         self,

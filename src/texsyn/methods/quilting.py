@@ -447,7 +447,7 @@ class Quilting(TextureSynthesizer):
 
 def _editing_input(image: np.ndarray, known: np.ndarray, channels: int) -> tuple[np.ndarray, np.ndarray]:
     """An image to fill as ``(H, W, C)`` float64 and its mask of known pixels, checked."""
-    img = as_channels(as_exemplar(image, name="image"))
+    img = as_channels(as_exemplar(image, name="image", max_channels=max(3, channels)))
     mask = np.asarray(known, dtype=bool)
     if mask.shape != img.shape[:2]:
         raise InputError(f"mask of shape {mask.shape} does not match the image's {img.shape[:2]}")

@@ -79,6 +79,8 @@ class RandomPhase(TextureSynthesizer):
     """
 
     name = "random_phase"
+    #: channels are synthesised jointly: a material stack or an RGBA exemplar (docs/materials.md)
+    max_channels = 16
     memory_margin = CALIBRATED_MARGIN
     summary = "Random phase noise: exemplar Fourier modulus with a random phase"
     reference = "Galerne, Gousseau, Morel, IEEE TIP 2011"

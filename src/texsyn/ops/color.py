@@ -14,7 +14,9 @@ allowed values (:data:`COLOUR_SPACES`):
 - ``'rgb'``: the channels as given.
 
 A grey exemplar stays grey in every space. The building blocks (:func:`rgb_to_yuv`,
-:func:`luma`, :class:`ColorPCA`) are here too.
+:func:`luma`, :class:`ColorPCA`) are here too, and the sRGB transfer function
+(:func:`srgb_to_linear`, :func:`linear_to_srgb`) behind ``texsyn synth --linear``
+(``docs/materials.md``).
 """
 
 from __future__ import annotations
@@ -29,8 +31,10 @@ __all__ = [
     "ColorPCA",
     "ColourSpace",
     "colour_space",
+    "linear_to_srgb",
     "luma",
     "rgb_to_yuv",
+    "srgb_to_linear",
     "yuv_to_rgb",
 ]
 
@@ -58,6 +62,31 @@ def luma(image: np.ndarray) -> np.ndarray:
 def yuv_to_rgb(image: np.ndarray) -> np.ndarray:
     """Inverse of :func:`rgb_to_yuv` with the exact matrix inverse."""
     return np.asarray(image, dtype=np.float64) @ YUV_TO_RGB.T
+
+
+def srgb_to_linear(values: np.ndarray) -> np.ndarray:
+    """Linear light of sRGB-encoded values in [0, 1] (IEC 61966-2-1, the sRGB decoding).
+
+    Examples
+    --------
+    >>> [round(float(v), 4) for v in srgb_to_linear(np.array([0.0, 0.5, 1.0]))]
+    [0.0, 0.214, 1.0]
+    """
+    v = np.asarray(values, dtype=np.float64)
+    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
+
+
+def linear_to_srgb(values: np.ndarray) -> np.ndarray:
+    """sRGB encoding of linear values in [0, 1] (IEC 61966-2-1), the inverse of :func:`srgb_to_linear`.
+
+    Examples
+    --------
+    >>> v = np.linspace(0.0, 1.0, 11)
+    >>> bool(np.allclose(linear_to_srgb(srgb_to_linear(v)), v))
+    True
+    """
+    v = np.clip(np.asarray(values, dtype=np.float64), 0.0, None)
+    return np.where(v <= 0.0031308, 12.92 * v, 1.055 * v ** (1.0 / 2.4) - 0.055)
 
 
 class ColorPCA:
