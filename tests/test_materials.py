@@ -138,6 +138,34 @@ def test_replay_carries_channels_as_the_stack_does(tmp_path, material, capsys):
     assert not (tmp_path / "s.png").exists()
 
 
+def test_replay_refuses_channels_of_different_sizes(tmp_path, material, capsys):
+    """The map holds no exemplar size: a bigger channel's positions lie inside it, so the
+    channels are at least checked against each other (a 64x64 albedo with a 64x60 normal)."""
+    source = tmp_path / "map.npy"
+    np.save(source, np.zeros((8, 8, 2), dtype=np.int32))  # every position in any channel
+    write_image(tmp_path / "other.png", np.zeros((60, 64)))
+    out = tmp_path / "out"
+    code, err = run(capsys, "replay", source, material / "albedo.png", tmp_path / "other.png", "-o", out)
+    one_line_error(code, err, "64x60")
+    assert not out.exists()
+
+
+def test_a_stack_is_written_again_into_its_existing_folder(tmp_path, material, capsys):
+    """An existing output folder is no refusal: its files are replaced with --overwrite only."""
+    out = tmp_path / "out"
+    args = ["synth", material / "albedo.png", "--with", material / "rough.png", "-o", out]
+    args += ["-p", "patch_size=16", "--size", "48x40", "-q"]
+    code, err = run(capsys, *args, "--seed", "1")
+    assert code == 0, err
+    first = (out / "rough.png").read_bytes()
+    code, err = run(capsys, *args, "--seed", "2")
+    one_line_error(code, err, "--overwrite")
+    assert (out / "rough.png").read_bytes() == first
+    code, err = run(capsys, *args, "--seed", "2", "--overwrite")
+    assert code == 0, err
+    assert (out / "rough.png").read_bytes() != first
+
+
 def test_methods_that_cannot_carry_a_stack_say_which_can(tmp_path, material, capsys):
     out = tmp_path / "out"
     code, err = run(

@@ -151,6 +151,22 @@ def test_the_seam_band_keeps_the_methods_pixels_and_copies_exemplar_blocks_acros
     assert across.mean() > 0.6
 
 
+@pytest.mark.parametrize("name", ["lg", "sparse"])
+def test_the_seam_band_of_a_method_that_does_not_copy_is_copied_not_blended(name, brick):
+    """No cross-fade, no blur: outside the band the method's pixels, inside it exemplar values
+    (the 8-bit brick's levels, which the LG and sparse outputs' floats almost never hit).
+    The seam and sharpness statistics alone pass a 16-pixel cross-fade of these methods' wraps."""
+    model = texsyn.make_method(name, **FAST.get(name, {})).fit(brick)
+    plain, tiled = model.sample((96, 80), rng=4), model.sample((96, 80), rng=4, tileable=True)
+    half = seam_band_width(BAND_PATCH) // 2
+    band = np.zeros((96, 80), dtype=bool)
+    band[:half] = band[-half:] = True
+    band[:, :half] = band[:, -half:] = True
+    np.testing.assert_array_equal(tiled[~band], plain[~band])
+    assert np.isin(tiled[band], brick).all()
+    assert not np.isin(plain[band], brick).all()
+
+
 def test_the_seam_band_fits_small_outputs_and_small_exemplars():
     tiny = texsyn.data.exemplar("gravel", size=20)
     out = texsyn.synthesize(tiny, "efros_leung", (24, 30), rng=1, tileable=True, window_size=5)

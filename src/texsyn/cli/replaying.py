@@ -65,6 +65,12 @@ def replay_command(source_map, channels, output, normal_maps, bit_depth, overwri
         layers = []
         for path in channels:
             found = read_image_file(path)
+            if layers and found.pixels.shape[:2] != layers[0][0].pixels.shape[:2]:
+                first = layers[0][0].pixels.shape
+                raise InputError(
+                    f"'{path}' is {found.pixels.shape[1]}x{found.pixels.shape[0]} and '{channels[0]}' "
+                    f"{first[1]}x{first[0]}; every CHANNEL must have the exemplar's size"
+                )
             target = stack_output_path(folder, path) if as_folder else folder
             normal = path in normal_maps or is_normal_name(Path(path).name)
             if normal and (found.pixels.ndim != 3 or found.pixels.shape[2] != 3):

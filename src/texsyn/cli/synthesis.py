@@ -60,7 +60,7 @@ __all__ = ["stream_bands", "synth"]
 
 @click.command()
 @click.argument("exemplar", required=False)
-@output_option("Output image (.png, .jpg, .tif, .npy, .exr), or a folder with --with.")
+@output_option("Output image (.png, .jpg, .tif, .npy, .exr), or a folder with --with.", folder=True)
 @click.option(
     "-m", "--method", default="quilting", show_default=True, help="Synthesis method (see `texsyn methods`)."
 )
