@@ -183,7 +183,7 @@ def test_the_seam_band_keeps_the_methods_pixels_and_copies_exemplar_blocks_acros
     assert across.mean() > 0.6
 
 
-@pytest.mark.parametrize("name", ["lg", "sparse"])
+@pytest.mark.parametrize("name", ["lg", "clg", "rclg", "mslg", "sparse", "grouplets", "cwt"])
 def test_the_seam_band_of_a_method_that_does_not_copy_is_copied_not_blended(name, brick):
     """No cross-fade, no blur: outside the band the method's pixels, inside it exemplar values
     (the 8-bit brick's levels, which the LG and sparse outputs' floats almost never hit).
