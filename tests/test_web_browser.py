@@ -163,10 +163,15 @@ def test_two_jobs_at_once_from_two_pages_both_finish(browser, server):
         tabs.append(tab)
     for tab in tabs:
         tab.click("#run")
+    commands = []
     for tab in tabs:
         tab.wait_for_selector("#status[data-state=done]", timeout=60_000)
         tab.wait_for_function("document.getElementById('out-image').naturalWidth === 64")
+        assert tab.text_content("#status-text").startswith("done in")
+        assert tab.is_hidden("#error")
+        commands.append(tab.text_content("#command-line"))
         tab.context.close()
+    assert "-m quilting" in commands[0] and "-m heeger_bergen" in commands[1]
 
 
 def test_compare_mode_shows_the_reports_table_and_pictures(page):
