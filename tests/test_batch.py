@@ -442,3 +442,23 @@ def test_an_output_that_would_replace_an_input_is_refused(tmp_path):
     write_image(exemplar, texsyn.data.exemplar("brick", size=32))
     with pytest.raises(texsyn.errors.InputError, match="would replace the input"):
         batch.plan([str(exemplar)], tmp_path / "out", ["quilting"], seed_list=[3])
+
+
+def test_an_output_folder_below_a_file_is_a_one_line_input_error(tmp_path, capsys):
+    (tmp_path / "afile").write_text("not a folder")
+    exemplar = tmp_path / "ex.png"
+    write_image(exemplar, texsyn.data.exemplar("brick", size=32))
+    code = main(
+        [
+            "batch",
+            str(exemplar),
+            "-o",
+            str(tmp_path / "afile" / "sub"),
+            "-m",
+            "random_phase",
+            "--workers",
+            "1",
+        ]
+    )
+    err = capsys.readouterr().err
+    assert code == 2 and "cannot be made" in err and err.count("\n") == 1

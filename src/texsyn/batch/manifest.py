@@ -61,7 +61,12 @@ class Manifest:
 
     # -------------------------------------------------------------- writing
     def __enter__(self) -> Manifest:
-        self.outdir.mkdir(parents=True, exist_ok=True)
+        try:
+            self.outdir.mkdir(parents=True, exist_ok=True)
+        except (FileExistsError, NotADirectoryError):  # OUTDIR, or a folder above it, is a file
+            raise InputError(
+                f"output folder '{self.outdir}' cannot be made: it or a folder above it is a file; give a folder (-o)"
+            ) from None
         self._lock()
         return self
 
