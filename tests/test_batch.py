@@ -22,7 +22,7 @@ import pytest
 
 import texsyn
 from texsyn.cli import main
-from texsyn.io import write_image
+from texsyn.io import read_image_header, write_image
 from texsyn.metrics import METRIC_DESCRIPTIONS
 
 distributed = pytest.importorskip("distributed")
@@ -462,3 +462,47 @@ def test_an_output_folder_below_a_file_is_a_one_line_input_error(tmp_path, capsy
     )
     err = capsys.readouterr().err
     assert code == 2 and "cannot be made" in err and err.count("\n") == 1
+
+
+def test_a_16_bit_exemplar_gives_the_16_bit_output_of_texsyn_synth(cluster, tmp_path):
+    """synth writes at the exemplar's bit depth by default (issue 23): a batch item too."""
+    rng = np.random.default_rng(2)
+    folder = tmp_path / "in"
+    folder.mkdir()
+    deep = np.kron(rng.random((8, 8, 3)), np.ones((4, 4, 1)))  # 32x32, 16-bit levels
+    write_image(folder / "deep.png", deep, bit_depth=16)
+    write_image(folder / "alpha.png", np.dstack([deep, np.ones((32, 32))]))
+    np.save(folder / "height.npy", (3.0 * deep[..., 0]).astype(np.float32))
+    items = batch.plan(
+        [str(folder / "deep.png"), str(folder / "alpha.png"), str(folder / "height.npy")],
+        tmp_path / "out",
+        ["random_phase"],
+        size=(36, 40),  # (height, width): --size 40x36,
+    )
+    records = {Path(r["exemplar"]).name: r for r in batch.run(items, client=cluster)}
+    done = records["deep.png"]
+    assert done["status"] == "done"
+    produced = tmp_path / "out" / done["output"]
+    assert read_image_header(produced).bit_depth == 16
+    out = tmp_path / "synth.png"
+    assert (
+        main(
+            [
+                "synth",
+                str(folder / "deep.png"),
+                "-m",
+                "random_phase",
+                "--seed",
+                str(done["seed"]),
+                "--size",
+                "40x36",
+                "-q",
+                "-o",
+                str(out),
+            ]
+        )
+        == 0
+    )
+    assert sha(out) == done["sha256"] == sha(produced)
+    assert records["alpha.png"]["status"] == "failed" and "alpha channel" in records["alpha.png"]["error"]
+    assert records["height.npy"]["status"] == "failed" and "floating-point" in records["height.npy"]["error"]

@@ -17,11 +17,13 @@ import numpy as np
 
 from .. import data
 from ..data import BUILTIN_PREFIX
+from ..errors import InputError
 from ..io import OutputSet, read_image
+from ..io.reading import ImageFile, read_image_file
 from ..methods import SynthesisResult, TextureSynthesizer
 from ..ops import position_colors
 
-__all__ = ["input_path", "load_exemplar", "stream_bands", "write_texture"]
+__all__ = ["input_path", "load_exemplar", "read_batch_exemplar", "stream_bands", "write_texture"]
 
 
 def input_path(name: str | None) -> str | None:
@@ -42,6 +44,34 @@ def load_exemplar(exemplar: str | None) -> tuple[np.ndarray, str]:
     return read_image(exemplar), exemplar
 
 
+def read_batch_exemplar(path: str | Path, name: str | None = None) -> ImageFile:
+    """An exemplar file as ``texsyn synth`` reads it (samples, bit depth, ICC profile), for a
+    batch item, which writes a PNG at the exemplar's bit depth with its profile as ``synth``
+    does by default (``--bit-depth auto``, ``docs/materials.md``).
+
+    Raises
+    ------
+    InputError
+        An exemplar with alpha or floating-point samples: ``synth`` makes a material of the
+        one and cannot write the other to PNG; batch items are PNG images of colour or grey.
+    """
+    if str(path).startswith(BUILTIN_PREFIX):
+        return ImageFile(data.exemplar(str(path).split(":", 1)[1]), 8, "builtin")
+    found = read_image_file(path)
+    shown = name or str(path)
+    if found.pixels.ndim == 3 and found.pixels.shape[2] in (2, 4):
+        raise InputError(
+            f"'{shown}' has an alpha channel; batch items are colour or grey PNGs: use texsyn synth, "
+            "which carries alpha (docs/materials.md)"
+        )
+    if found.bit_depth == 32:
+        raise InputError(
+            f"'{shown}' holds floating-point samples, which a PNG cannot; use texsyn synth with a "
+            ".tif, .npy or .exr output (docs/materials.md)"
+        )
+    return found
+
+
 def write_texture(
     outputs: OutputSet,
     synthesizer: TextureSynthesizer,
@@ -51,6 +81,7 @@ def write_texture(
     exemplar_shape: tuple[int, ...],
     *,
     bit_depth: int = 8,
+    icc_profile: bytes | None = None,
     callback=None,
 ) -> SynthesisResult | None:
     """Sample a fitted ``synthesizer`` and write the texture to ``image_path``, as ``synth`` does.
@@ -63,12 +94,21 @@ def write_texture(
     if synthesizer.streams_rows:
         with outputs:
             stream_bands(
-                outputs, synthesizer, shape, seed, callback, exemplar_shape, image_path, None, bit_depth
+                outputs,
+                synthesizer,
+                shape,
+                seed,
+                callback,
+                exemplar_shape,
+                image_path,
+                None,
+                bit_depth,
+                icc_profile=icc_profile,
             )
         return None
     result = synthesizer.sample_with_map(shape, rng=seed, callback=callback)
     with outputs:
-        outputs.write_image(image_path, result.image, bit_depth=bit_depth)
+        outputs.write_image(image_path, result.image, bit_depth=bit_depth, icc_profile=icc_profile)
     return result
 
 

@@ -31,11 +31,12 @@ import numpy as np
 from .._version import __version__
 from ..errors import InputError
 from ..io import OutputSet, read_image
+from ..io.reading import ImageFile
 from ..methods import TextureSynthesizer, make_method
 from ..ops.canvas import default_output_shape, prepare_exemplar
 from ..ops.linalg import THREADS_VARIABLE
 from .items import BatchItem, file_sha256
-from .synthesis import load_exemplar, write_texture
+from .synthesis import read_batch_exemplar, write_texture
 
 __all__ = [
     "ExemplarBytes",
@@ -76,6 +77,9 @@ class FittedModel:
     synthesizer: TextureSynthesizer
     exemplar: np.ndarray
     seconds: float
+    #: the exemplar file's bit depth (8 or 16) and ICC profile: the output's, as ``synth`` writes it
+    bit_depth: int = 8
+    icc_profile: bytes | None = None
 
 
 @dataclass(frozen=True)
@@ -145,14 +149,13 @@ def describe_error(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {message}" if message else type(exc).__name__
 
 
-def _read_source(source: str | ExemplarBytes) -> np.ndarray:
-    if isinstance(source, ExemplarBytes):  # written where read_image can open it, as the client's file
+def _read_source(source: str | ExemplarBytes) -> ImageFile:
+    if isinstance(source, ExemplarBytes):  # written where the reader can open it, as the client's file
         with tempfile.TemporaryDirectory(prefix="texsyn-batch-") as folder:
             path = Path(folder) / ("exemplar" + Path(source.name).suffix)
             path.write_bytes(source.data)
-            return read_image(path)
-    image, _ = load_exemplar(source)
-    return image
+            return read_batch_exemplar(path, source.name)
+    return read_batch_exemplar(source)
 
 
 def fit_task(source: str | ExemplarBytes, method: str, params: dict) -> FittedModel | FitFailure:
@@ -160,10 +163,12 @@ def fit_task(source: str | ExemplarBytes, method: str, params: dict) -> FittedMo
     try:
         with one_thread():
             start = time.perf_counter()
-            exemplar = prepare_exemplar(_read_source(source))
+            found = _read_source(source)
+            exemplar = prepare_exemplar(found.pixels)
             synthesizer = make_method(method, **params)
             synthesizer.fit(exemplar)
-            return FittedModel(synthesizer, exemplar, time.perf_counter() - start)
+            depth = 16 if found.bit_depth == 16 else 8
+            return FittedModel(synthesizer, exemplar, time.perf_counter() - start, depth, found.icc_profile)
     except Exception as exc:  # recorded by each of its items
         return FitFailure(describe_error(exc))
 
@@ -253,8 +258,17 @@ def _make(item: BatchItem, fitted: FittedModel, target: Path) -> tuple[int, int]
     shape = item.size if item.size is not None else default_output_shape(exemplar.shape)
     synthesizer.check_memory_for(exemplar.shape, shape, streaming=synthesizer.streams_rows)
     outputs = OutputSet(overwrite=True)
-    path = outputs.claim(target)
-    write_texture(outputs, synthesizer, shape, item.seed, path, exemplar.shape)
+    path = outputs.claim(target, bit_depth=fitted.bit_depth)
+    write_texture(
+        outputs,
+        synthesizer,
+        shape,
+        item.seed,
+        path,
+        exemplar.shape,
+        bit_depth=fitted.bit_depth,
+        icc_profile=fitted.icc_profile,
+    )
     return shape
 
 
