@@ -79,7 +79,8 @@ def time_batch(client, root: Path, inputs: Path, repeats: int) -> float:
 
 def serial(inputs: Path, root: Path) -> float:
     """The 32 jobs in this process, one after the other: fit once per (exemplar, method), sample, write."""
-    from texsyn.batch.synthesis import load_exemplar, write_texture
+    from texsyn.batch.synthesis import write_texture
+    from texsyn.data import load_exemplar
     from texsyn.io import OutputSet
     from texsyn.ops.canvas import prepare_exemplar
 

@@ -29,7 +29,7 @@ LAYERS: dict[str, int] = {
     "texsyn._lazy": 0,
     "texsyn._validation": 1,
     "texsyn.io": 2,
-    "texsyn.data": 2,
+    "texsyn.data": 3,
     "texsyn.ops": 3,
     "texsyn.transforms": 4,
     "texsyn.models": 5,

@@ -1,7 +1,7 @@
 """One output, made exactly as ``texsyn synth`` makes it (``docs/batch.md``, "Same bytes").
 
 ``texsyn synth`` and every batch item read the exemplar argument the same way
-(:func:`load_exemplar`: a file, or ``builtin:NAME``), fit the method, and write the texture
+(:func:`texsyn.data.load_exemplar`: a file, or ``builtin:NAME``), fit the method, and write the texture
 with :func:`write_texture`: a method that synthesises in raster order streams its bands of
 rows to the file (:func:`stream_bands`, ``docs/performance.md``), any other is sampled whole
 and written with :meth:`~texsyn.io.OutputSet.write_image`. The two paths encode a PNG
@@ -15,15 +15,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import data
-from ..data import BUILTIN_PREFIX
+from ..data import BUILTIN_PREFIX, read_exemplar
 from ..errors import InputError
-from ..io import OutputSet, read_image
-from ..io.reading import ImageFile, read_image_file
+from ..io import OutputSet
+from ..io.reading import ImageFile
 from ..methods import SynthesisResult, TextureSynthesizer
 from ..ops import position_colors
 
-__all__ = ["input_path", "load_exemplar", "read_batch_exemplar", "stream_bands", "write_texture"]
+__all__ = ["input_path", "read_batch_exemplar", "stream_bands", "write_texture"]
 
 
 def input_path(name: str | None) -> str | None:
@@ -31,17 +30,6 @@ def input_path(name: str | None) -> str | None:
     if name is None or name.startswith(BUILTIN_PREFIX):
         return None
     return name
-
-
-def load_exemplar(exemplar: str | None) -> tuple[np.ndarray, str]:
-    """The image an exemplar argument names (a file, ``builtin:NAME``, or by default the
-    built-in brick) and how messages name it."""
-    if exemplar is None:
-        return data.exemplar("brick"), "built-in brick"
-    if exemplar.startswith(BUILTIN_PREFIX):
-        name = exemplar.split(":", 1)[1]
-        return data.exemplar(name), f"built-in {name}"
-    return read_image(exemplar), exemplar
 
 
 def read_batch_exemplar(path: str | Path, name: str | None = None) -> ImageFile:
@@ -55,10 +43,8 @@ def read_batch_exemplar(path: str | Path, name: str | None = None) -> ImageFile:
         An exemplar with alpha or floating-point samples: ``synth`` makes a material of the
         one and cannot write the other to PNG; batch items are PNG images of colour or grey.
     """
-    if str(path).startswith(BUILTIN_PREFIX):
-        return ImageFile(data.exemplar(str(path).split(":", 1)[1]), 8, "builtin")
-    found = read_image_file(path)
-    shown = name or str(path)
+    found, label = read_exemplar(str(path))
+    shown = name or label
     if found.pixels.ndim == 3 and found.pixels.shape[2] in (2, 4):
         raise InputError(
             f"'{shown}' has an alpha channel; batch items are colour or grey PNGs: use texsyn synth, "

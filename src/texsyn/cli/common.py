@@ -22,7 +22,8 @@ import click
 import numpy as np
 
 from .._version import __version__
-from ..batch.synthesis import input_path, load_exemplar
+from ..batch.synthesis import input_path
+from ..data import load_exemplar
 from ..errors import InputError
 from ..io import OutputSet, check_image_size, max_image_pixels, read_image, read_image_header
 from ..io.arrays import load_npy

@@ -155,14 +155,10 @@ class Layer:
 
 
 def read_exemplar(exemplar: str | None, preparation: dict) -> tuple[ImageFile, str]:
-    """The exemplar's samples as stored (alpha kept, floats in their range), cropped or
-    shrunk as ``preparation`` says, and how messages name it."""
-    if exemplar is None or exemplar.startswith(BUILTIN_PREFIX):
-        name = "brick" if exemplar is None else exemplar.split(":", 1)[1]
-        found = ImageFile(data.exemplar(name), 8, "builtin")
-        label = f"built-in {name}"
-    else:
-        found, label = read_image_file(exemplar), exemplar
+    """The exemplar's samples as stored (alpha kept, floats in their range:
+    :func:`texsyn.data.read_exemplar`), cropped or shrunk as ``preparation`` says, and how
+    messages name it."""
+    found, label = data.read_exemplar(exemplar)
     image = prepare_exemplar(found.pixels, **preparation)
     return ImageFile(image, found.bit_depth, found.format, found.icc_profile), label
 

@@ -16,23 +16,13 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import data
+from ..data import load_exemplar
 from ..io import read_image, write_image
 from ..io.arrays import load_npy
 from ..metrics import METRIC_DESCRIPTIONS, evaluate, nearest_patch_field, synthesis_map
 from ..ops.linalg import fixed_order
 
-__all__ = ["BUILTIN_PREFIX", "load_exemplar", "main", "measure"]
-
-#: how the command line names a built-in exemplar (``texsyn synth builtin:brick``)
-BUILTIN_PREFIX = "builtin:"
-
-
-def load_exemplar(name: str) -> np.ndarray:
-    """The exemplar ``texsyn synth NAME`` reads: a built-in (``builtin:brick``) or an image file."""
-    if name.startswith(BUILTIN_PREFIX):
-        return data.exemplar(name[len(BUILTIN_PREFIX) :])
-    return read_image(name)
+__all__ = ["main", "measure"]
 
 
 @fixed_order
@@ -70,7 +60,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     exemplar_name, output, folder = args[:3]
     try:
-        exemplar = load_exemplar(exemplar_name)
+        exemplar, _ = load_exemplar(exemplar_name)
         image = read_image(output)
         source_map = load_npy(args[3]) if len(args) == 4 else None
         metrics, map_image = measure(exemplar, image, source_map)
