@@ -12,15 +12,14 @@ from __future__ import annotations
 
 import html
 import os
-import platform
 from collections.abc import Sequence
 from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
 
-from .._version import __version__
 from ..metrics import METRIC_DESCRIPTIONS
+from ..report import TABLE_STYLE, library_versions
 
 __all__ = ["batch_report", "render_batch_html"]
 
@@ -66,12 +65,7 @@ def batch_report(records: Sequence[dict], outdir: str | os.PathLike, *, metadata
     data: dict = {
         "texsyn_batch_report": 1,
         "created": datetime.now(UTC).isoformat(timespec="seconds"),
-        "versions": {
-            "texsyn": __version__,
-            "python": platform.python_version(),
-            "numpy": np.__version__,
-            "platform": platform.platform(terse=True),
-        },
+        "versions": library_versions(),
         "outdir": str(outdir),
         "metrics": METRIC_DESCRIPTIONS,
         "summary": [_summary(m, [r for r in records if r["method"] == m]) for m in methods],
@@ -153,6 +147,7 @@ def render_batch_html(data: dict, page: str | os.PathLike) -> str:
     )
     versions = ", ".join(f"{k} {v}" for k, v in data["versions"].items())
     return _PAGE.format(
+        style=TABLE_STYLE,
         title=esc(f"texsyn batch comparison: {len(data['exemplars'])} exemplars"),
         created=esc(data["created"]),
         summary="\n".join(row(entry) for entry in data["summary"]),
@@ -169,14 +164,8 @@ _PAGE = """<!DOCTYPE html>
 <meta charset="utf-8">
 <title>{title}</title>
 <style>
-body {{ font-family: system-ui, sans-serif; margin: 2em; color: #222; }}
-table {{ border-collapse: collapse; margin: 1em 0; }}
-th, td {{ border: 1px solid #ccc; padding: 0.3em 0.6em; text-align: right; }}
-th:first-child, td:first-child, td.outputs {{ text-align: left; }}
-tr.failed td {{ color: #a00; }}
-td.outputs {{ white-space: nowrap; }}
+{style}td.outputs {{ text-align: left; white-space: nowrap; }}
 td.outputs img {{ image-rendering: pixelated; border: 1px solid #ddd; margin: 1px; }}
-.error {{ color: #a00; }}
 </style>
 </head>
 <body>

@@ -10,11 +10,14 @@ nothing.
 
 from __future__ import annotations
 
-from .comparison import run_comparison
+from .comparison import library_versions, run_comparison
 from .files import claim_report, report_paths, write_report
+from .html import TABLE_STYLE
 from .records import MethodRecord, MethodRun, Report
 
 __all__ = [
+    "TABLE_STYLE",
+    "library_versions",
     "MethodRun",
     "MethodRecord",
     "Report",

@@ -29,10 +29,11 @@ from ..ops.linalg import fixed_order
 from ..ops.progress import Progress, Reporter
 from .records import MethodRecord, MethodRun, Report
 
-__all__ = ["run_comparison"]
+__all__ = ["library_versions", "run_comparison"]
 
 
-def _versions() -> dict[str, str]:
+def library_versions() -> dict[str, str]:
+    """texsyn's version and those of the libraries and platform a report was made with."""
     import scipy
     import skimage
 
@@ -137,6 +138,6 @@ def run_comparison(
         shape=out_shape,
         seeds=list(range(seeds)),
         records=records,
-        versions=_versions(),
+        versions=library_versions(),
         created=datetime.now(UTC).isoformat(timespec="seconds"),
     )

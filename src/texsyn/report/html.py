@@ -18,7 +18,17 @@ from ..metrics import METRIC_DESCRIPTIONS
 if TYPE_CHECKING:
     from .records import Report
 
-__all__ = ["figure", "png_data_uri", "render_html"]
+__all__ = ["TABLE_STYLE", "figure", "png_data_uri", "render_html"]
+
+#: the style of a report's page and tables (the batch report shares it)
+TABLE_STYLE = """\
+body { font-family: system-ui, sans-serif; margin: 2em; color: #222; }
+table { border-collapse: collapse; margin: 1em 0; }
+th, td { border: 1px solid #ccc; padding: 0.3em 0.6em; text-align: right; }
+th:first-child, td:first-child { text-align: left; }
+tr.failed td { color: #a00; text-align: left; }
+.error { color: #a00; }
+"""
 
 
 def render_html(report: Report) -> str:
@@ -60,6 +70,7 @@ def render_html(report: Report) -> str:
     versions = ", ".join(f"{k} {v}" for k, v in report.versions.items())
     h, w = report.shape
     return _PAGE.format(
+        style=TABLE_STYLE,
         title=esc(f"texsyn comparison: {report.exemplar_name}"),
         name=esc(report.exemplar_name),
         created=esc(report.created),
@@ -101,15 +112,9 @@ _PAGE = """<!DOCTYPE html>
 <meta charset="utf-8">
 <title>{title}</title>
 <style>
-body {{ font-family: system-ui, sans-serif; margin: 2em; color: #222; }}
-table {{ border-collapse: collapse; margin: 1em 0; }}
-th, td {{ border: 1px solid #ccc; padding: 0.3em 0.6em; text-align: right; }}
-th:first-child, td:first-child {{ text-align: left; }}
-tr.failed td {{ color: #a00; text-align: left; }}
-figure {{ display: inline-block; margin: 0.5em; vertical-align: top; }}
+{style}figure {{ display: inline-block; margin: 0.5em; vertical-align: top; }}
 figure img {{ image-rendering: pixelated; border: 1px solid #ddd; }}
 figcaption {{ font-size: 0.85em; color: #555; }}
-.error {{ color: #a00; }}
 code {{ font-size: 0.9em; }}
 </style>
 </head>
