@@ -72,7 +72,7 @@ def test_help_shows_the_formats_the_options_and_the_loop(capsys):
     assert "learned|turbulence|vortices|noise" in text
     assert "steers the flow back to its start over the last N frames" in text
     spec = texsyn.get_method("grouplets").param_specs()["speed"]
-    assert f"[default: {spec.default:g}]" in text  # read from the signature
+    assert f"[default: {spec.text(spec.default)}]" in text  # read from the signature, as -p writes it
 
 
 BAD_OPTIONS = [

@@ -28,11 +28,8 @@ def list_methods() -> None:
         else:
             click.echo("  parameters:")
             for spec in specs.values():
-                default = "none" if spec.default is None else spec.default
-                if isinstance(default, tuple):
-                    default = ",".join(f"{v:g}" for v in default)
                 click.echo(
-                    f"    {spec.name} = {default}  ({spec.type.__name__}, allowed {spec.describe_allowed()})"
+                    f"    {spec.name} = {spec.text(spec.default)}  ({spec.type.__name__}, allowed {spec.describe_allowed()})"
                     + (f"  {spec.description}" if spec.description else "")
                 )
         click.echo("")

@@ -220,12 +220,11 @@ def method_option(method: str, name: str, help: str):
         allowed = ""
     else:
         kind, allowed = Number(), f", {spec.describe_allowed()}"
-    default = f"{spec.default:g}" if isinstance(spec.default, float) else spec.default
     return click.option(
         "--" + name.replace("_", "-"),
         name,
         type=kind,
-        help=f"{help} (parameter '{name}' of {method}{allowed}) [default: {default}]",
+        help=f"{help} (parameter '{name}' of {method}{allowed}) [default: {spec.text(spec.default)}]",
     )
 
 

@@ -77,6 +77,25 @@ class ParamSpec:
             parts.append("or none")
         return " ".join(parts)
 
+    def text(self, value: Any) -> str:
+        """``value`` as the command line writes it, which :meth:`parse` reads back exactly
+        (floats as their shortest round-trip form).
+
+        >>> ParamSpec("boundary_cut", bool, True, None, False, "").text(True)
+        'true'
+        >>> ParamSpec("sigma", tuple, (0.0, 0.3), None, False, "").text((0.0, 0.3))
+        '0.0,0.3'
+        """
+        if value is None:
+            return "none"
+        if isinstance(value, (bool, np.bool_)):
+            return "true" if value else "false"
+        if isinstance(value, tuple):
+            return ",".join(self.text(v) for v in value)
+        if isinstance(value, (float, np.floating)):
+            return repr(float(value))
+        return str(value)
+
     def check(self, value: Any, method: str) -> Any:
         """Validate (and lightly coerce, e.g. int to float) one value; return it."""
         where = f"parameter {self.name!r} of method {method!r}"

@@ -57,18 +57,6 @@ def _allowed(spec) -> dict | None:
     return None
 
 
-def _default_text(value) -> str:
-    if value is None:
-        return "none"
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, tuple):
-        return ",".join(f"{v:g}" if isinstance(v, float) else str(v) for v in value)
-    if isinstance(value, float):
-        return f"{value:g}"
-    return str(value)
-
-
 def method_catalogue() -> list[dict]:
     """Every registered method and its parameter specs, as the page builds its form from them."""
     out = []
@@ -80,7 +68,7 @@ def method_catalogue() -> list[dict]:
                 {
                     "name": spec.name,
                     "type": spec.type.__name__,
-                    "default": _default_text(spec.default),
+                    "default": spec.text(spec.default),
                     "allowed": _allowed(spec),
                     "optional": spec.optional,
                     "help": spec.description,
