@@ -457,10 +457,14 @@ class TextureSynthesizer:
         out_shape = check_output_shape(default_output_shape(ex.shape) if shape is None else shape)
         self._check_memory(ex.shape, out_shape)
         generator = normalize_rng(rng)
-        sampled = self._sample(out_shape, generator, callback)
+        tiling = self.tiling_for(out_shape) if tileable else None
+        if tiling == "torus":
+            sampled = self._sample_torus(out_shape, generator, callback)
+        else:
+            sampled = self._sample(out_shape, generator, callback)
         image, source = sampled[0], sampled[1]
         diagnostics = sampled[2] if len(sampled) > 2 else None
-        if tileable and not self.periodic_for(out_shape):  # a quilted seam band (methods._tiling)
+        if tiling == "seam band":  # methods._tiling
             from ._tiling import quilted_seam_band
 
             image, source = quilted_seam_band(self._as_output(image), source, ex, generator)
@@ -532,6 +536,39 @@ class TextureSynthesizer:
     ) -> Iterator[tuple[np.ndarray, np.ndarray | None]]:
         """The method's synthesis as ``(rows, source_rows)`` bands, top to bottom (:attr:`streams_rows`)."""
         raise NotImplementedError  # pragma: no cover - only methods that stream define it
+
+    def tiling_for(self, shape: tuple[int, int]) -> str:
+        """How ``tileable=True`` makes an output of ``shape`` wrap (``docs/tiling.md``).
+
+        Returns
+        -------
+        str
+            ``"periodic"``: the method's canvas is periodic by construction
+            (:meth:`periodic_for`), the output is the plain one; ``"torus"``: the method
+            searches and stitches on a torus itself, with wrap-around neighbourhoods and
+            seams (:meth:`torus_for`); ``"seam band"``: the output is drawn as usual and a
+            band across each wrap is quilted again from the exemplar
+            (:func:`texsyn.methods._tiling.quilted_seam_band`).
+        """
+        if self.periodic_for(shape):
+            return "periodic"
+        if self.torus_for(shape):
+            return "torus"
+        return "seam band"
+
+    def torus_for(self, shape: tuple[int, int]) -> bool:
+        """Whether the method can synthesise an output of ``shape`` on a torus itself
+        (:meth:`_sample_torus`): its neighbourhoods and seams wrap around the output's edges."""
+        return False
+
+    def _sample_torus(
+        self,
+        shape: tuple[int, int],
+        rng: np.random.Generator,
+        callback: Callable[[Progress], None] | None,
+    ) -> tuple[np.ndarray, np.ndarray | None] | tuple[np.ndarray, np.ndarray | None, dict]:
+        """:meth:`_sample` on a torus: the output wraps in both directions (:meth:`torus_for`)."""
+        raise NotImplementedError  # pragma: no cover - only methods whose torus_for is true
 
     def periodic_for(self, shape: tuple[int, int]) -> bool:
         """Whether an output of ``shape`` wraps around by construction.
