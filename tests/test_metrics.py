@@ -72,6 +72,16 @@ def test_blur_drops_sharpness_and_high_frequencies(scores):
     assert s["largest_copy"] == 0.0
 
 
+def test_gradient_energy_sees_blur_and_noise_but_not_gaussian_gradients(cases, exemplar):
+    assert metrics.gradient_energy_ratio(exemplar, exemplar) == pytest.approx(1.0)
+    assert metrics.gradient_energy_ratio(cases["blurred"], exemplar) < 0.6
+    rng = np.random.default_rng(0)
+    shuffled = rng.permutation(exemplar.reshape(-1, *exemplar.shape[2:])).reshape(exemplar.shape)
+    assert metrics.gradient_energy_ratio(shuffled, exemplar) > 1.5
+    # random phase noise keeps the power spectrum, hence the gradient energy
+    assert metrics.gradient_energy_ratio(cases["random_phase"], exemplar) == pytest.approx(1.0, abs=0.1)
+
+
 def test_a_different_texture_is_farther_on_every_distance(scores):
     near, far = scores["crop"], scores["other"]
     for key in ("histogram_distance", "spectrum_distance", "patch_coherence", "reverse_distance"):

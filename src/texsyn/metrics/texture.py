@@ -23,6 +23,8 @@ __all__ = [
     "spectrum_distance",
     "mean_gradient",
     "sharpness_ratio",
+    "gradient_energy_ratio",
+    "rms_gradient",
     "laplacian_band_energies",
     "mean_coherence",
 ]
@@ -106,12 +108,17 @@ def spectrum_distance(image, exemplar, *, n_bins: int | None = None) -> float:
     return float(np.sqrt(np.mean((a[ok] - b[ok]) ** 2)))
 
 
-def mean_gradient(image: np.ndarray) -> float:
-    """Mean magnitude of the forward-difference gradient (all channels jointly)."""
+def squared_gradients(image: np.ndarray) -> np.ndarray:
+    """Squared magnitude of the forward-difference gradient at each pixel (all channels jointly)."""
     img = as_channels(np.asarray(image, dtype=np.float64))
     gy = np.diff(img, axis=0)[:, :-1]
     gx = np.diff(img, axis=1)[:-1, :]
-    return float(np.mean(np.sqrt(np.sum(gx * gx + gy * gy, axis=2))))
+    return np.sum(gx * gx + gy * gy, axis=2)
+
+
+def mean_gradient(image: np.ndarray) -> float:
+    """Mean magnitude of the forward-difference gradient (all channels jointly)."""
+    return float(np.mean(np.sqrt(squared_gradients(image))))
 
 
 def sharpness_ratio(image, exemplar) -> float:
@@ -125,6 +132,28 @@ def sharpness_ratio(image, exemplar) -> float:
     if reference == 0:
         raise ValueError("the exemplar is flat (zero gradient); the sharpness ratio is undefined")
     return mean_gradient(img) / reference
+
+
+def gradient_energy_ratio(image, exemplar) -> float:
+    """Root-mean-square gradient magnitude of the image over that of the exemplar.
+
+    Sharpness as a spectral quantity: the mean squared forward difference is the power
+    spectrum weighted by ``|1 - exp(i omega)|^2``, so a synthesis with the exemplar's power
+    spectrum (random phase noise, Galerne et al. 2011) has a ratio of 1, and a blurred one
+    below 1. Unlike :func:`sharpness_ratio`, it does not depend on how sparse the gradients
+    are: a Gaussian texture's mean |gradient| is ``sqrt(pi)/2`` of its RMS gradient, a
+    structured exemplar's much less (``docs/tiling.md``, "How it is tested").
+    """
+    img, ex = check_pair(image, exemplar)
+    reference = rms_gradient(ex)
+    if reference == 0:
+        raise ValueError("the exemplar is flat (zero gradient); the gradient energy ratio is undefined")
+    return rms_gradient(img) / reference
+
+
+def rms_gradient(image: np.ndarray) -> float:
+    """Root-mean-square magnitude of the forward-difference gradient (all channels jointly)."""
+    return float(np.sqrt(np.mean(squared_gradients(image))))
 
 
 #: :func:`contrast_ratio` needs the exemplar's luma deviation above this (values in [0, 1])...
