@@ -12,7 +12,7 @@ import pytest
 import texsyn
 from texsyn.cli import main
 from texsyn.io import read_image
-from texsyn.methods._tiling import BAND_PATCH, seam_band_width
+from texsyn.methods._tiling import BAND_PATCH, quilted_seam_band, seam_band_width
 from texsyn.metrics import sharpness_ratio
 
 #: settings that keep the slow methods quick; the tiling does not depend on them
@@ -165,11 +165,51 @@ def test_a_method_periodic_by_construction_samples_as_usual(brick):
     assert not texsyn.make_method("patch_wavelet").fit(brick).periodic_for((96, 128))
 
 
+# ------------------------------------------------------------------ on a torus
+#: the methods that search and stitch on the output's torus themselves (docs/tiling.md)
+TORUS_METHODS = ["quilting"]
+
+
+@pytest.mark.parametrize("name", TORUS_METHODS)
+def test_the_block_methods_quilt_on_a_torus_with_cuts_across_the_wraps(name, brick):
+    """No band: the last block column and row overlap the first ones across the wraps and are
+    joined to them along cuts, so across each wrap most neighbours are exemplar neighbours
+    (inside a block) and the places where they are not are not one straight line."""
+    model = texsyn.make_method(name).fit(brick)
+    assert model.tiling_for((128, 128)) == model.tiling_for((256, 256)) == "torus"
+    assert model.tiling_for((100, 90)) == "torus" and model.tiling_for((30, 128)) == "seam band"
+    tiled = model.sample_with_map((100, 90), rng=3, tileable=True)
+    source = tiled.source_map
+    np.testing.assert_array_equal(tiled.image, brick[source[..., 0], source[..., 1]])
+    across_columns = np.all(source[:, 0] == source[:, -1] + [0, 1], axis=-1)
+    across_rows = np.all(source[0] == source[-1] + [1, 0], axis=-1)
+    assert 0.5 < across_columns.mean() < 1 and 0.5 < across_rows.mean() < 1
+
+
+def _blocks_without_wrap(canvas, rows, cols, size, choose, paste, *, torus=False, **options):
+    """The sabotage: the same blocks laid on a plane (nothing wraps), cropped to the output."""
+    from texsyn.drivers.raster import fill_blocks
+
+    plane = np.zeros((int(rows[-1]) + size, int(cols[-1]) + size, canvas.shape[2]))
+    done = fill_blocks(plane, rows, cols, size, choose, paste, **options)
+    canvas[...] = plane[: canvas.shape[0], : canvas.shape[1]]
+    return done[: canvas.shape[0], : canvas.shape[1]]
+
+
+@pytest.mark.parametrize("name", TORUS_METHODS)
+def test_the_seam_check_fails_a_torus_method_whose_blocks_do_not_wrap(name, brick, monkeypatch):
+    module = type(texsyn.make_method(name)).__module__
+    monkeypatch.setattr(f"{module}.fill_blocks", _blocks_without_wrap)
+    model = texsyn.make_method(name).fit(brick)
+    assert seam_strength(model.sample((128, 128), rng=0, tileable=True)) > 1.5
+
+
 # ------------------------------------------------------------------ the quilted seam band
 def test_the_seam_band_keeps_the_methods_pixels_and_copies_exemplar_blocks_across_the_wraps(brick):
     model = texsyn.make_method("quilting", patch_size=24).fit(brick)
-    plain = model.sample_with_map((100, 90), rng=5)
-    tiled = model.sample_with_map((100, 90), rng=5, tileable=True)
+    plain = model.sample_with_map((100, 90), rng=5)  # quilting tiles on a torus: its band directly
+    image, source = quilted_seam_band(plain.image, plain.source_map, brick, np.random.default_rng(5))
+    tiled = texsyn.SynthesisResult(image=image, source_map=source)
     reach = seam_band_width(BAND_PATCH)  # half the band and the zone of its cut, each side
     kept = np.ones((100, 90), dtype=bool)
     kept[:reach, :] = kept[-reach:, :] = False  # the band across each wrap and its edges' cuts
