@@ -132,12 +132,15 @@ def raster_positions(size: int, n: int, step: int) -> np.ndarray:
 def torus_positions(length: int, size: int, step: int) -> np.ndarray:
     """Corners of the blocks that cover a torus of circumference ``length``, in visiting order.
 
-    ``k = ceil(length / step)`` blocks (at least 2), their corners spread evenly:
-    ``floor(i length / k)``. Every step is then ``floor(length / k)`` or one more, at most
-    ``step``, so every overlap, the wrapped one (last block over the first) included, is at
-    least ``size - step`` and at most one pixel more than the others; when ``step`` divides
-    ``length`` the corners are ``0, step, 2 step, ...`` and every overlap is ``size - step``
-    (``docs/tiling.md``, "On a torus").
+    ``k`` blocks, their corners spread evenly, ``floor(i length / k)``, so that every step is
+    ``floor(length / k)`` or one more and every overlap, the wrapped one (the last block
+    over the first) included, is the same all round to a pixel. ``k = ceil(length / step)``,
+    the fewest blocks whose steps are at most ``step`` (overlaps at least ``size - step``;
+    when ``step`` divides ``length``, corners ``0, step, 2 step, ...`` and exactly that
+    overlap), but no more than ``length // (size // 2 + 1)`` and at least 2: every step is
+    more than half a block, so the last block, which overlaps blocks on both its sides,
+    keeps pixels of its own (an overlap of half a block or more, LG's default, becomes
+    ``size // 2 - 1`` or less on a torus; ``docs/tiling.md``, "On a torus").
 
     Examples
     --------
@@ -145,23 +148,25 @@ def torus_positions(length: int, size: int, step: int) -> np.ndarray:
     [0, 25, 50, 75]
     >>> torus_positions(81, 32, 27).tolist()
     [0, 27, 54]
+    >>> torus_positions(128, 40, 20).tolist()  # steps of 21 or 22, not 20
+    [0, 21, 42, 64, 85, 106]
     """
-    count = max(2, -(-int(length) // int(step)))
+    count = max(2, min(-(-int(length) // int(step)), int(length) // (int(size) // 2 + 1)))
     return (np.arange(count) * int(length)) // count
 
 
 def torus_fits(length: int, size: int, step: int) -> bool:
     """Whether :func:`torus_positions` lays blocks of ``size`` on a torus of ``length``:
-    every step longer than half a block, so that a block's overlaps with its neighbours on
-    either side never meet (and a block never overlaps itself).
+    every step more than half a block (a block's overlaps on its two sides never meet, and
+    a block never overlaps itself) and less than a block (neighbours overlap).
 
     Examples
     --------
-    >>> torus_fits(128, 32, 27), torus_fits(30, 32, 27)
-    (True, False)
+    >>> torus_fits(128, 32, 27), torus_fits(30, 32, 27), torus_fits(128, 40, 20)
+    (True, False, True)
     """
     steps = np.diff(np.append(torus_positions(length, size, step), length))
-    return bool(2 * steps.min() > size)
+    return bool(2 * steps.min() > size and steps.max() < size)
 
 
 def fill_blocks(

@@ -34,7 +34,14 @@ from typing import Any
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
-from ..drivers.raster import Block, block_canvas, block_positions, fill_block_rows, fill_blocks
+from ..drivers.raster import (
+    Block,
+    block_canvas,
+    block_positions,
+    fill_block_rows,
+    fill_blocks,
+    torus_positions,
+)
 from ..errors import InputError
 from ..models.gaussian import LocalGaussian, PatchSource
 from ..ops.canvas import crop_to_output
@@ -272,6 +279,14 @@ PASTE: dict[str, Callable[[Block, np.ndarray], np.ndarray]] = {
     "none": lambda block, new: new,
 }
 
+#: :data:`PASTE` on a torus: the boundary cut also runs through the known strips on the
+#: right and at the bottom (the last column and row, ``docs/tiling.md``); averaging and
+#: overwriting treat every known pixel alike already
+PASTE_TORUS: dict[str, Callable[[Block, np.ndarray], np.ndarray]] = {
+    **PASTE,
+    "quilt": lambda block, new: paste_cut(block.values, new, block.known, every_side=True),
+}
+
 
 # ---------------------------------------------------------------------------- the loop
 def _first_and_choose(
@@ -322,6 +337,7 @@ def single_scale(
     rng: np.random.Generator,
     reporter: Reporter | None,
     looseness: float = 0.0,
+    torus: bool = False,
 ) -> np.ndarray:
     """Algorithm 2 (LG, CLG or RCLG) on an enlarged canvas, cropped to ``shape``.
 
@@ -355,13 +371,26 @@ def single_scale(
     rng : numpy.random.Generator
     reporter : Reporter or None
         Receives ``(done, total)`` after every patch but the seed.
+    torus : bool
+        Synthesise on the output's torus (tileable outputs, ``docs/tiling.md``, "On a
+        torus"): the blocks (:func:`~texsyn.drivers.raster.torus_positions`) wrap across the
+        edges, each patch's Gaussian is estimated from and conditioned on every known pixel
+        of its block, the wrapped ones included, and the cut runs through every known strip
+        (:data:`PASTE_TORUS`); the canvas is the output.
     """
     n = source.size
     step = n - overlap
-    canvas = np.zeros(block_canvas(shape, n, step) + (exemplar.shape[2],))
     first, choose = _first_and_choose(
         exemplar, source, m, model, mode, sigma, theta, seed_patch, rng, looseness
     )
+    if torus:
+        canvas = np.zeros(tuple(shape) + (exemplar.shape[2],))
+        rows, cols = torus_positions(shape[0], n, step), torus_positions(shape[1], n, step)
+        fill_blocks(
+            canvas, rows, cols, n, choose, PASTE_TORUS[seam], seed=first, reporter=reporter, torus=True
+        )
+        return canvas
+    canvas = np.zeros(block_canvas(shape, n, step) + (exemplar.shape[2],))
     rows, cols = block_positions(shape[0], n, step), block_positions(shape[1], n, step)
     fill_blocks(canvas, rows, cols, n, choose, PASTE[seam], seed=first, reporter=reporter)
     return crop_to_output(canvas, shape)
