@@ -129,7 +129,7 @@ def raster_positions(size: int, n: int, step: int) -> np.ndarray:
     return np.asarray(pos)
 
 
-def torus_positions(length: int, size: int, step: int) -> np.ndarray:
+def torus_positions(length: int, size: int, step: int, *, free: int = 1) -> np.ndarray:
     """Corners of the blocks that cover a torus of circumference ``length``, in visiting order.
 
     ``k`` blocks, their corners spread evenly, ``floor(i length / k)``, so that every step is
@@ -137,10 +137,10 @@ def torus_positions(length: int, size: int, step: int) -> np.ndarray:
     over the first) included, is the same all round to a pixel. ``k = ceil(length / step)``,
     the fewest blocks whose steps are at most ``step`` (overlaps at least ``size - step``;
     when ``step`` divides ``length``, corners ``0, step, 2 step, ...`` and exactly that
-    overlap), but no more than ``length // (size // 2 + 1)`` and at least 2: every step is
-    more than half a block, so the last block, which overlaps blocks on both its sides,
-    keeps pixels of its own (an overlap of half a block or more, LG's default, becomes
-    ``size // 2 - 1`` or less on a torus; ``docs/tiling.md``, "On a torus").
+    overlap), but at least 2 and no more than leave every step at least ``(size + free) / 2``:
+    the last block of a row (column), which overlaps blocks on both its sides, keeps
+    ``free`` pixels of its own between them. An overlap of half a block or more (the LG
+    family's default) is then smaller on a torus (``docs/tiling.md``, "On a torus").
 
     Examples
     --------
@@ -150,23 +150,27 @@ def torus_positions(length: int, size: int, step: int) -> np.ndarray:
     [0, 27, 54]
     >>> torus_positions(128, 40, 20).tolist()  # steps of 21 or 22, not 20
     [0, 21, 42, 64, 85, 106]
+    >>> torus_positions(128, 40, 20, free=10).tolist()  # steps of 25 or 26
+    [0, 25, 51, 76, 102]
     """
-    count = max(2, min(-(-int(length) // int(step)), int(length) // (int(size) // 2 + 1)))
+    least = -(-(int(size) + max(1, int(free))) // 2)
+    count = max(2, min(-(-int(length) // int(step)), int(length) // least))
     return (np.arange(count) * int(length)) // count
 
 
-def torus_fits(length: int, size: int, step: int) -> bool:
+def torus_fits(length: int, size: int, step: int, *, free: int = 1) -> bool:
     """Whether :func:`torus_positions` lays blocks of ``size`` on a torus of ``length``:
-    every step more than half a block (a block's overlaps on its two sides never meet, and
-    a block never overlaps itself) and less than a block (neighbours overlap).
+    every step at least ``(size + free) / 2`` (a block's overlaps on its two sides leave
+    ``free`` pixels between them, and a block never overlaps itself) and less than a block
+    (neighbours overlap).
 
     Examples
     --------
     >>> torus_fits(128, 32, 27), torus_fits(30, 32, 27), torus_fits(128, 40, 20)
     (True, False, True)
     """
-    steps = np.diff(np.append(torus_positions(length, size, step), length))
-    return bool(2 * steps.min() > size and steps.max() < size)
+    steps = np.diff(np.append(torus_positions(length, size, step, free=free), length))
+    return bool(2 * steps.min() >= size + max(1, int(free)) and steps.max() < size)
 
 
 def fill_blocks(

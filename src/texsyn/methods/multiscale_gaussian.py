@@ -52,6 +52,7 @@ from .single_scale_gaussian import (
     local_gaussian_bytes,
     match_exemplar_marginals,
     single_scale,
+    torus_free,
 )
 
 __all__ = ["MSLG", "ZOOM_SIGMA"]
@@ -279,8 +280,9 @@ class MSLG(TextureSynthesizer):
         n, big = self.patch_size, 2 ** (self.n_scales - 1)
         if self.post != "none" or any(side % big for side in shape):
             return False
+        free = torus_free("lg", n)
         return all(
-            torus_fits(side // 2**level, n, step)
+            torus_fits(side // 2**level, n, step, free=free)
             for side in shape
             for level in range(self.n_scales)
             for step in (n - n // 2, n // 2)
@@ -366,8 +368,11 @@ class MSLG(TextureSynthesizer):
             return under + draw(gauss, self.mode, rng).reshape(n, n, channels)  # 13-14
 
         out = np.zeros_like(low)
-        positions = torus_positions if torus else raster_positions
-        rows = positions(height, n, n // 2)
-        cols = positions(width, n, n // 2)
+        if torus:  # the last block keeps a quarter free, as at the coarsest scale (LG's draws)
+            rows, cols = (
+                torus_positions(side, n, n // 2, free=torus_free("lg", n)) for side in (height, width)
+            )
+        else:
+            rows, cols = raster_positions(height, n, n // 2), raster_positions(width, n, n // 2)
         fill_blocks(out, rows, cols, n, choose, PASTE["none"], reporter=reporter, torus=torus)
         return out
