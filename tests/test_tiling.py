@@ -99,11 +99,23 @@ def check_method_tiles(name: str, exemplar: np.ndarray, size: int, seeds, sharpn
         assert strength <= SEAM_LIMIT, (
             f"{name} seed {seed}: seams {strength:.2f} x the interior's 90th percentile"
         )
-        for offset in (-half_band, half_band):  # where the band meets the method's pixels
-            spike = edge_spike(result.image, offset, 2 * half_band)
-            assert spike <= EDGE_SPIKE_LIMIT, (
-                f"{name} seed {seed}: the line {offset:+d} from the seam is {spike:.2f}x its neighbours"
-            )
+        if model.tiling_for((size, size)) == "torus":
+            # no band; the lines at the wrap are no spikier than every line away from it (a
+            # draw squeezed between two given sides measured 3-4x its neighbours there, the
+            # lines' own spikes reach 1.5-1.9)
+            offsets, spikes = line_spikes(result.image)
+            farthest = spikes[np.abs(offsets) > 8].max()
+            for offset in (-1, 0):
+                spike = spikes[offsets == offset][0]
+                assert spike <= farthest, (
+                    f"{name} seed {seed}: the line {offset:+d} from the wrap is {spike:.2f}x its neighbours"
+                )
+        else:
+            for offset in (-half_band, half_band):  # where the band meets the method's pixels
+                spike = edge_spike(result.image, offset, 2 * half_band)
+                assert spike <= EDGE_SPIKE_LIMIT, (
+                    f"{name} seed {seed}: the line {offset:+d} from the seam is {spike:.2f}x its neighbours"
+                )
         if result.source_map is not None and model.source_map_exact:
             rows, cols = result.source_map[..., 0], result.source_map[..., 1]
             np.testing.assert_array_equal(result.image, exemplar[rows, cols])

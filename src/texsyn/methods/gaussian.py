@@ -211,7 +211,7 @@ class _LocalGaussianBase(TextureSynthesizer):
         """True where the blocks fit on the output's torus
         (:func:`~texsyn.drivers.raster.torus_fits`: steps of more than half a patch)."""
         n, step = self.patch_size, self.patch_size - self._overlap_px()
-        return all(torus_fits(length, n, step, free=torus_free(self._model, n)) for length in shape)
+        return all(torus_fits(length, n, step, free=torus_free(n)) for length in shape)
 
     def _sample_torus(self, shape, rng, callback):
         """Algorithm 2 on the output's torus (``docs/tiling.md``, "On a torus"): the patches

@@ -280,7 +280,7 @@ class MSLG(TextureSynthesizer):
         n, big = self.patch_size, 2 ** (self.n_scales - 1)
         if self.post != "none" or any(side % big for side in shape):
             return False
-        free = torus_free("lg", n)
+        free = torus_free(n)
         return all(
             torus_fits(side // 2**level, n, step, free=free)
             for side in shape
@@ -368,10 +368,8 @@ class MSLG(TextureSynthesizer):
             return under + draw(gauss, self.mode, rng).reshape(n, n, channels)  # 13-14
 
         out = np.zeros_like(low)
-        if torus:  # the last block keeps a quarter free, as at the coarsest scale (LG's draws)
-            rows, cols = (
-                torus_positions(side, n, n // 2, free=torus_free("lg", n)) for side in (height, width)
-            )
+        if torus:  # the last block keeps a quarter free, as at the coarsest scale
+            rows, cols = (torus_positions(side, n, n // 2, free=torus_free(n)) for side in (height, width))
         else:
             rows, cols = raster_positions(height, n, n // 2), raster_positions(width, n, n // 2)
         fill_blocks(out, rows, cols, n, choose, PASTE["none"], reporter=reporter, torus=torus)

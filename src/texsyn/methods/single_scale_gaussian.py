@@ -289,15 +289,14 @@ PASTE_TORUS: dict[str, Callable[[Block, np.ndarray], np.ndarray]] = {
 }
 
 
-def torus_free(model: str, patch_size: int) -> int:
+def torus_free(patch_size: int) -> int:
     """Pixels the last block of a row (column) keeps free between its two overlaps on a torus
-    (:func:`~texsyn.drivers.raster.torus_positions`): a quarter of the patch for LG's draws,
-    which are not conditioned on the overlap and meet it only along the cuts (with one free
-    pixel the wrap of a 256x256 brick output measured 1.7 times the interior's strong lines,
-    with a quarter at most 1.05); one for CLG and RCLG, whose draws are conditioned on both
-    sides (a quarter measured worse there: 0.7-0.94 against 0.47-0.57;
-    ``docs/tiling.md``, "On a torus")."""
-    return max(1, patch_size // 4) if model == "lg" else 1
+    (:func:`~texsyn.drivers.raster.torus_positions`): a quarter of the patch. With one free
+    pixel the draw is squeezed between two given sides that the model fits only in part: on
+    a 256x256 brick output CLG's and RCLG's line at the wrap measured 3-4 times its
+    neighbours, and LG's wrap 1.7 times the interior's strong lines; with a quarter, at most
+    1.25 and 0.94 (``docs/tiling.md``, "On a torus")."""
+    return max(1, patch_size // 4)
 
 
 # ---------------------------------------------------------------------------- the loop
@@ -397,7 +396,7 @@ def single_scale(
     )
     if torus:
         canvas = np.zeros(tuple(shape) + (exemplar.shape[2],))
-        free = torus_free(model, n)
+        free = torus_free(n)
         rows, cols = (torus_positions(side, n, step, free=free) for side in shape)
         fill_blocks(
             canvas, rows, cols, n, choose, PASTE_TORUS[seam], seed=first, reporter=reporter, torus=True
