@@ -3,7 +3,7 @@ import itertools
 import numpy as np
 import pytest
 
-from texsyn.ops.seams import boundary_cut_mask, l_shaped_cut, min_path
+from texsyn.ops.seams import boundary_cut_mask, cut_mask, l_shaped_cut, min_path
 
 
 def all_paths(rows, cols, start_cols=None):
@@ -81,3 +81,36 @@ def test_l_cut_side_without_labelling_is_the_labelled_component():
             compared += 1
             assert np.array_equal(fast, _inside_l_cut_by_labels(h, w, ci, cj, v_cols, h_rows)), trial
     assert compared > 2900
+
+
+def test_cut_on_every_side_runs_through_the_trailing_strips_along_the_least_error():
+    """On a torus the last block of a row overlaps the first on its right: the cut runs
+    through that strip too, along the column where old and new agree (docs/tiling.md)."""
+    old, new = np.zeros((12, 12)), np.ones((12, 12))
+    new[:, 9] = 0.0  # old and new agree on one column of the right strip
+    known = np.zeros((12, 12), dtype=bool)
+    known[:, 8:] = True
+    assert cut_mask(old, new, known).all()  # the plain cut: the known right strip is overwritten
+    take = cut_mask(old, new, known, every_side=True)
+    assert take[:, :10].all() and not take[:, 10:].any()
+    known[:, :3] = known[:3] = known[-2:] = True  # all four sides
+    take = cut_mask(old, new, known, every_side=True)
+    assert take[3:-2, 3:8].all() and not take[:, 10:].any() and not take[-2:].all() and not take[:3].all()
+
+
+def test_blocks_on_a_torus_see_their_wrapped_neighbours():
+    from texsyn.drivers.raster import fill_blocks, torus_positions
+
+    rows, cols = torus_positions(20, 8, 6), torus_positions(26, 8, 6)
+    seen = []
+
+    def choose(block):
+        seen.append(block.known.copy())
+        return block.row * 100 + block.col
+
+    canvas = np.zeros((20, 26, 1))
+    done = fill_blocks(canvas, rows, cols, 8, choose, lambda block, v: np.full((8, 8, 1), v), torus=True)
+    assert done.all() and len(seen) == rows.size * cols.size
+    assert seen[cols.size - 1][:, -2:].all() and not seen[cols.size - 2][:, -1].any()  # right, wrapped
+    assert seen[-1][:2].all() and seen[-1][-2:].all() and seen[-1][:, :2].all() and seen[-1][:, -2:].all()
+    assert canvas[0, 0, 0] == rows[-1] * 100 + cols[-1]  # the last block wrapped onto the corner

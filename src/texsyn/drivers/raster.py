@@ -54,6 +54,8 @@ __all__ = [
     "fill_blocks",
     "grow_pixels",
     "raster_positions",
+    "torus_fits",
+    "torus_positions",
 ]
 
 
@@ -67,9 +69,10 @@ class Block:
     row, col : int
         Top-left corner in the canvas.
     values : ndarray, shape (n, n, C)
-        The canvas under the block (a view: do not write to it).
+        The canvas under the block (a view: do not write to it; on a torus, a copy
+        gathered across the wraps).
     known : ndarray of bool, shape (n, n)
-        Which of its pixels are already synthesised (a view).
+        Which of its pixels are already synthesised (a view; a copy on a torus).
     """
 
     row: int
@@ -126,6 +129,50 @@ def raster_positions(size: int, n: int, step: int) -> np.ndarray:
     return np.asarray(pos)
 
 
+def torus_positions(length: int, size: int, step: int, *, free: int = 1) -> np.ndarray:
+    """Corners of the blocks that cover a torus of circumference ``length``, in visiting order.
+
+    ``k`` blocks, their corners spread evenly, ``floor(i length / k)``, so that every step is
+    ``floor(length / k)`` or one more and every overlap, the wrapped one (the last block
+    over the first) included, is the same all round to a pixel. ``k = ceil(length / step)``,
+    the fewest blocks whose steps are at most ``step`` (overlaps at least ``size - step``;
+    when ``step`` divides ``length``, corners ``0, step, 2 step, ...`` and exactly that
+    overlap), but at least 2 and no more than leave every step at least ``(size + free) / 2``:
+    the last block of a row (column), which overlaps blocks on both its sides, keeps
+    ``free`` pixels of its own between them. An overlap of half a block or more (the LG
+    family's default) is then smaller on a torus (``docs/tiling.md``, "On a torus").
+
+    Examples
+    --------
+    >>> torus_positions(100, 32, 27).tolist()
+    [0, 25, 50, 75]
+    >>> torus_positions(81, 32, 27).tolist()
+    [0, 27, 54]
+    >>> torus_positions(128, 40, 20).tolist()  # steps of 21 or 22, not 20
+    [0, 21, 42, 64, 85, 106]
+    >>> torus_positions(128, 40, 20, free=10).tolist()  # steps of 25 or 26
+    [0, 25, 51, 76, 102]
+    """
+    least = -(-(int(size) + max(1, int(free))) // 2)
+    count = max(2, min(-(-int(length) // int(step)), int(length) // least))
+    return (np.arange(count) * int(length)) // count
+
+
+def torus_fits(length: int, size: int, step: int, *, free: int = 1) -> bool:
+    """Whether :func:`torus_positions` lays blocks of ``size`` on a torus of ``length``:
+    every step at least ``(size + free) / 2`` (a block's overlaps on its two sides leave
+    ``free`` pixels between them, and a block never overlaps itself) and less than a block
+    (neighbours overlap).
+
+    Examples
+    --------
+    >>> torus_fits(128, 32, 27), torus_fits(30, 32, 27), torus_fits(128, 40, 20)
+    (True, False, True)
+    """
+    steps = np.diff(np.append(torus_positions(length, size, step, free=free), length))
+    return bool(2 * steps.min() >= size + max(1, int(free)) and steps.max() < size)
+
+
 def fill_blocks(
     canvas: np.ndarray,
     rows: Sequence[int] | np.ndarray,
@@ -137,6 +184,7 @@ def fill_blocks(
     seed: np.ndarray | None = None,
     reporter: Reporter | None = None,
     known: np.ndarray | None = None,
+    torus: bool = False,
 ) -> np.ndarray:
     """Fill ``canvas`` block by block in raster order (rows, then columns within a row).
 
@@ -165,6 +213,13 @@ def fill_blocks(
         Canvas pixels known before the loop (hole filling, ``docs/editing.md``): the blocks
         see them as known, and a block whose pixels are all known is skipped (counted as
         done). By default nothing is known.
+    torus : bool
+        The canvas is a torus (tileable outputs, ``docs/tiling.md``, "On a torus"): a block
+        that crosses the right (bottom) edge goes on at the left (top), so the last block
+        of a row overlaps the row's first block and the last row the first row; the
+        block's ``values`` and ``known`` are then copies gathered across the wraps, its
+        known pixels on every side are those already placed, and its content is written
+        back across the wraps. ``rows`` and ``cols`` come from :func:`torus_positions`.
 
     Returns
     -------
@@ -175,10 +230,14 @@ def fill_blocks(
     known = np.zeros(canvas.shape[:2], dtype=bool) if known is None else np.array(known, dtype=bool)
     total = len(rows) * len(cols)
     done = 0
+    height, width = known.shape
     for x in rows:
         for y in cols:
-            window = canvas[x : x + size, y : y + size]
-            mask = known[x : x + size, y : y + size]
+            if torus:  # the block's pixels across the wraps, as copies written back below
+                at: Any = np.ix_((x + np.arange(size)) % height, (y + np.arange(size)) % width)
+            else:
+                at = (slice(x, x + size), slice(y, y + size))
+            window, mask = canvas[at], known[at]
             if skip_known and mask.all():
                 done += 1
                 if reporter is not None:
@@ -187,11 +246,15 @@ def fill_blocks(
             if done == 0 and seed is not None:
                 window[...] = seed
                 mask[...] = True
+                if torus:
+                    canvas[at], known[at] = window, mask
                 done = 1
                 continue
             block = Block(int(x), int(y), window, mask)
             window[...] = paste(block, choose(block))
             mask[...] = True
+            if torus:
+                canvas[at], known[at] = window, mask
             done += 1
             if reporter is not None:
                 reporter(done, total)

@@ -35,7 +35,7 @@ from typing import Annotated, Any
 import numpy as np
 
 from .._validation import OneOf, Range, as_exemplar, normalize_rng
-from ..drivers.raster import Block, block_canvas, fill_blocks, raster_positions
+from ..drivers.raster import Block, block_canvas, fill_blocks, raster_positions, torus_fits
 from ..errors import InputError
 from ..models.gaussian import PatchSource
 from ..ops.linalg import fixed_order
@@ -55,6 +55,7 @@ from .single_scale_gaussian import (
     overlap_pixels,
     single_scale,
     single_scale_rows,
+    torus_free,
 )
 
 __all__ = ["CLG", "LG", "MSLG", "RCLG", "gaussian_resample", "raster_positions"]
@@ -202,6 +203,22 @@ class _LocalGaussianBase(TextureSynthesizer):
     def _sample(self, shape, rng, callback):
         options = self._loop_options(rng, callback)
         out = single_scale(as_channels(self.exemplar_), self.source_, shape, **options)
+        if self.histogram == "match":
+            out = match_exemplar_marginals(out, self.exemplar_, patch_size=self.patch_size)
+        return out, None
+
+    def torus_for(self, shape: tuple[int, int]) -> bool:
+        """True where the blocks fit on the output's torus
+        (:func:`~texsyn.drivers.raster.torus_fits`: steps of more than half a patch)."""
+        n, step = self.patch_size, self.patch_size - self._overlap_px()
+        return all(torus_fits(length, n, step, free=torus_free(n)) for length in shape)
+
+    def _sample_torus(self, shape, rng, callback):
+        """Algorithm 2 on the output's torus (``docs/tiling.md``, "On a torus"): the patches
+        wrap across the edges, each conditioned on (CLG, RCLG) or estimated from (LG) every
+        known pixel of its block, the wrapped ones included, and cut through every overlap."""
+        options = self._loop_options(rng, callback)
+        out = single_scale(as_channels(self.exemplar_), self.source_, shape, torus=True, **options)
         if self.histogram == "match":
             out = match_exemplar_marginals(out, self.exemplar_, patch_size=self.patch_size)
         return out, None

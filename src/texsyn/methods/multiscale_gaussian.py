@@ -32,7 +32,7 @@ import numpy as np
 
 from .._validation import OneOf, Range
 from ..drivers.coarse_to_fine import coarse_to_fine
-from ..drivers.raster import Block, fill_blocks, raster_positions
+from ..drivers.raster import Block, fill_blocks, raster_positions, torus_fits, torus_positions
 from ..errors import InputError
 from ..models.gaussian import PatchSource
 from ..models.histograms import SubbandHistograms, subband_histograms
@@ -52,6 +52,7 @@ from .single_scale_gaussian import (
     local_gaussian_bytes,
     match_exemplar_marginals,
     single_scale,
+    torus_free,
 )
 
 __all__ = ["MSLG", "ZOOM_SIGMA"]
@@ -271,9 +272,32 @@ class MSLG(TextureSynthesizer):
         out = crop_to_output(pyramid.inverse(coeffs), image.shape[:2])
         return match_exemplar_marginals(out, self.exemplar_, patch_size=self.patch_size)
 
-    def _sample(self, shape, rng, callback):
+    def torus_for(self, shape: tuple[int, int]) -> bool:
+        """True where MSLG can run on the output's torus (``docs/tiling.md``, "On a torus"):
+        no Portilla–Simoncelli pass, sides that are multiples of ``2^(n_scales - 1)`` (every
+        scale is the output's torus, halved), and blocks that fit the torus at every scale
+        (:func:`~texsyn.drivers.raster.torus_fits`)."""
+        n, big = self.patch_size, 2 ** (self.n_scales - 1)
+        if self.post != "none" or any(side % big for side in shape):
+            return False
+        free = torus_free(n)
+        return all(
+            torus_fits(side // 2**level, n, step, free=free)
+            for side in shape
+            for level in range(self.n_scales)
+            for step in (n - n // 2, n // 2)
+        )
+
+    def _sample_torus(self, shape, rng, callback):
+        """Algorithm 3 on the output's torus: the coarsest scale's LG and every finer scale's
+        blocks wrap across the edges (:func:`~texsyn.drivers.raster.fill_blocks` with
+        ``torus=True``), and the zoom-in between scales is periodic (eq. 12 as the paper
+        writes it), so that every scale wraps."""
+        return self._sample(shape, rng, callback, torus=True)
+
+    def _sample(self, shape, rng, callback, torus: bool = False):
         n, big, n_scales = self.patch_size, 2 ** (self.n_scales - 1), self.n_scales
-        canvas_h, canvas_w = self._canvas(shape)
+        canvas_h, canvas_w = tuple(shape) if torus else self._canvas(shape)
         sources = [self.coarse_source_] + self.fine_sources_
         m = min(clamp_neighbours(self.n_neighbors, s, self.name) for s in sources)
 
@@ -294,12 +318,13 @@ class MSLG(TextureSynthesizer):
                     seed_patch=self.seed_patch,
                     rng=rng,
                     reporter=reporter,
+                    torus=torus,
                 )
                 if self.histogram == "match":  # the coarse scale's contrast, before it is zoomed in
                     coarse = match_exemplar_marginals(coarse, self.scales_[-1])
                 return coarse
-            low = zoom_in(coarser, boundary=self.zoom_boundary)
-            return self._fine_scale(low, self.fine_sources_[level], m, rng, reporter)
+            low = zoom_in(coarser, boundary="periodic" if torus else self.zoom_boundary)
+            return self._fine_scale(low, self.fine_sources_[level], m, rng, reporter, torus=torus)
 
         out = crop_to_output(coarse_to_fine(scale, n_scales)[0], shape)
         if self.histogram == "match":
@@ -312,31 +337,40 @@ class MSLG(TextureSynthesizer):
         return out, None
 
     def _fine_scale(
-        self, low: np.ndarray, source: PatchSource, m: int, rng, reporter: Reporter
+        self, low: np.ndarray, source: PatchSource, m: int, rng, reporter: Reporter, torus: bool = False
     ) -> np.ndarray:
         """Alg. 3 lines 6-17: high frequencies sampled on top of the zoomed-in result ``low``.
 
         ``source`` holds this scale's joint search and its high frequencies (lines 9-11); the
         search's energy terms are cached for this call only, so the fitted source is never
-        changed.
+        changed. ``torus``: the blocks, and the part of ``low`` under each, wrap across the
+        edges (:func:`~texsyn.drivers.raster.torus_positions`).
         """
         n = self.patch_size
         channels = low.shape[2]
         low_weight = np.full((n, n, channels), 1.0 / (channels * n * n))
         energies: dict = {}  # this call's cache of the search's energy terms
 
+        height, width = low.shape[:2]
+
         def choose(block: Block) -> np.ndarray:
             # the joint distance of eq. (14): overlap term and low-resolution term, as channels
             x, y, mask = block.row, block.col, block.known
+            if torus:
+                under = low[np.ix_((x + np.arange(n)) % height, (y + np.arange(n)) % width)]
+            else:
+                under = low[x : x + n, y : y + n]
             k = int(mask.sum()) * channels
             over = np.broadcast_to(mask[..., None] / max(k, 1), (n, n, channels))
             weights = np.concatenate([over, low_weight], axis=2)
-            query = np.concatenate([block.values, low[x : x + n, y : y + n]], axis=2)
+            query = np.concatenate([block.values, under], axis=2)
             gauss = source.neighbour_gaussian(query, weights, m, energies=energies)  # lines 9-12
-            return low[x : x + n, y : y + n] + draw(gauss, self.mode, rng).reshape(n, n, channels)  # 13-14
+            return under + draw(gauss, self.mode, rng).reshape(n, n, channels)  # 13-14
 
         out = np.zeros_like(low)
-        rows = raster_positions(low.shape[0], n, n // 2)
-        cols = raster_positions(low.shape[1], n, n // 2)
-        fill_blocks(out, rows, cols, n, choose, PASTE["none"], reporter=reporter)
+        if torus:  # the last block keeps a quarter free, as at the coarsest scale
+            rows, cols = (torus_positions(side, n, n // 2, free=torus_free(n)) for side in (height, width))
+        else:
+            rows, cols = raster_positions(height, n, n // 2), raster_positions(width, n, n // 2)
+        fill_blocks(out, rows, cols, n, choose, PASTE["none"], reporter=reporter, torus=torus)
         return out

@@ -21,6 +21,8 @@ from ..drivers.raster import (
     fill_block_rows,
     fill_blocks,
     raster_positions,
+    torus_fits,
+    torus_positions,
 )
 from ..errors import InputError
 from ..ops.linalg import fixed_order
@@ -161,19 +163,26 @@ class Quilting(TextureSynthesizer):
         return ti, tj
 
     def _paste(
-        self, block: Block, corner: tuple[int, int], exemplar: np.ndarray, offsets: np.ndarray
+        self,
+        block: Block,
+        corner: tuple[int, int],
+        exemplar: np.ndarray,
+        offsets: np.ndarray,
+        every_side: bool = False,
     ) -> np.ndarray:
         """The block joined along the boundary cut (section 2.1, step 3).
 
         The canvas carries the exemplar position of every pixel as two extra channels
         after the colour ones (exact in float64), so that the cut places both at once.
+        ``every_side``: the cut also runs through known strips on the right and at the
+        bottom (on a torus, :func:`texsyn.ops.seams.cut_mask`).
         """
         b, c = offsets.shape[0], exemplar.shape[2]
         ti, tj = corner
         old = block.values
         new = np.concatenate([exemplar[ti : ti + b, tj : tj + b], offsets + (ti, tj)], axis=-1)
         if self.boundary_cut:
-            take = cut_mask(old[..., :c], new[..., :c], block.known)
+            take = cut_mask(old[..., :c], new[..., :c], block.known, every_side=every_side)
         else:
             take = np.ones((b, b), dtype=bool)
         return np.where(take[..., None], new, old)
@@ -212,6 +221,58 @@ class Quilting(TextureSynthesizer):
             source[top : top + rows.shape[0]] = rows_source
             top += rows.shape[0]
         return image, source
+
+    # ------------------------------------------------------------------ tileable (docs/tiling.md)
+    def _torus_steps(self, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray] | None:
+        """Block corners on the output's torus, rows and columns, or None where the
+        blocks do not fit (:func:`texsyn.drivers.raster.torus_fits`)."""
+        b, step = self.patch_size, self.patch_size - self._overlap()
+        if not all(torus_fits(length, b, step) for length in shape):
+            return None
+        return torus_positions(shape[0], b, step), torus_positions(shape[1], b, step)
+
+    def torus_for(self, shape: tuple[int, int]) -> bool:
+        """True where every step between blocks on the torus is more than half a block
+        (with the default overlap, an output side of at least ``patch_size + 2`` pixels and
+        a ``patch_size`` of at least 7)."""
+        return self._torus_steps(shape) is not None
+
+    def _sample_torus(self, shape, rng, callback):
+        """Section 2.1 on the output's torus (``docs/tiling.md``, "On a torus").
+
+        The blocks go in raster order over the torus (:func:`texsyn.drivers.raster.fill_blocks`
+        with ``torus=True``): the last block of each row overlaps the row's first across the
+        right edge and the last row the first row across the bottom edge. Each block is
+        chosen for its squared error on every known pixel of the block, the wrapped ones
+        included (the search :meth:`fill` runs on holes), and joined along the
+        minimum-error cut through every known strip: left and top, and on the last column
+        and row right and bottom too (:func:`texsyn.ops.seams.cut_mask`, ``every_side``).
+        """
+        ex = as_channels(self.exemplar_)
+        c = ex.shape[2]
+        b = self.patch_size
+        steps = self._torus_steps(shape)
+        assert steps is not None  # torus_for(shape) holds
+        energies: dict = {}
+        offsets = np.stack(np.meshgrid(np.arange(b), np.arange(b), indexing="ij"), axis=-1).astype(np.float64)
+        canvas = np.zeros(tuple(shape) + (c + 2,))
+
+        def choose(block: Block) -> tuple[int, int]:
+            return self._choose(
+                Block(block.row, block.col, block.values[..., :c], block.known), rng, energies
+            )
+
+        fill_blocks(
+            canvas,
+            steps[0],
+            steps[1],
+            b,
+            choose,
+            lambda block, corner: self._paste(block, corner, ex, offsets, every_side=True),
+            reporter=Reporter(callback, "blocks"),
+            torus=True,
+        )
+        return canvas[..., :c], canvas[..., c:].astype(np.int32)
 
     # ------------------------------------------------------------------ editing (docs/editing.md)
     @fixed_order

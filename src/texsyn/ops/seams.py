@@ -216,7 +216,7 @@ def leading_known(known: np.ndarray) -> tuple[int, int]:
     return left, top
 
 
-def cut_mask(old: np.ndarray, new: np.ndarray, known: np.ndarray) -> np.ndarray:
+def cut_mask(old: np.ndarray, new: np.ndarray, known: np.ndarray, *, every_side: bool = False) -> np.ndarray:
     """Which pixels of ``new`` are taken when it joins ``old`` along the boundary cut.
 
     The cut runs through the L-shaped known part of the block (:func:`leading_known`);
@@ -228,21 +228,33 @@ def cut_mask(old: np.ndarray, new: np.ndarray, known: np.ndarray) -> np.ndarray:
         The block's current content and the new patch.
     known : ndarray of bool, shape (h, w)
         The pixels already synthesised.
+    every_side : bool
+        Cut through the known strips on the right and at the bottom too (blocks on a
+        torus, whose last column, last row and last block overlap blocks placed on those
+        sides, ``docs/tiling.md``): a second L-shaped cut through the trailing strips, the
+        new patch taken where both cuts take it. Without trailing strips it is the plain cut.
 
     Returns
     -------
     ndarray of bool, shape (h, w)
     """
     left, top = leading_known(known)
-    return boundary_cut_mask(overlap_error(old, new), left, top) | ~known
+    error = overlap_error(old, new)
+    take = boundary_cut_mask(error, left, top)
+    if every_side:
+        right, bottom = leading_known(known[::-1, ::-1])
+        if right or bottom:
+            take &= boundary_cut_mask(error[::-1, ::-1], right, bottom)[::-1, ::-1]
+    return take | ~known
 
 
-def paste_cut(old: np.ndarray, new: np.ndarray, known: np.ndarray) -> np.ndarray:
+def paste_cut(old: np.ndarray, new: np.ndarray, known: np.ndarray, *, every_side: bool = False) -> np.ndarray:
     """The block after ``new`` joins ``old`` along the minimum-error boundary cut.
 
-    Efros and Freeman (2001, section 2.1); ``old`` and ``new`` of shape ``(h, w, C)``.
+    Efros and Freeman (2001, section 2.1); ``old`` and ``new`` of shape ``(h, w, C)``;
+    ``every_side`` as in :func:`cut_mask`.
     """
-    return np.where(cut_mask(old, new, known)[..., None], new, old)
+    return np.where(cut_mask(old, new, known, every_side=every_side)[..., None], new, old)
 
 
 def paste_average(old: np.ndarray, new: np.ndarray, known: np.ndarray) -> np.ndarray:
