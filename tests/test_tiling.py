@@ -314,7 +314,7 @@ def test_efros_leung_on_a_torus_is_the_same_bytes_twice_and_not_the_plain_output
     assert not np.array_equal(first.image, model.sample((40, 48), rng=5))
 
 
-@pytest.mark.parametrize("search", ["exact", "approximate"])
+@pytest.mark.parametrize("search", [pytest.param("exact", marks=pytest.mark.slow), "approximate"])
 def test_efros_leung_with_the_wrap_ignored_fails_the_seam_check(search, brick, monkeypatch):
     """Sabotage: the growth on the torus, but every pixel written only in place (no copy
     across the wraps) and the compiled loops told nothing wraps: the windows and the
