@@ -356,8 +356,8 @@ def grow_pixels(
     """Grow a texture pixel by pixel from a seed (Efros and Leung 1999, section 2).
 
     * A small seed copied from a random place of the exemplar sits at the centre of the
-      output (on a torus, across its corner; ``seed_block=(row, col, height, width)`` names it instead; cropped, centred,
-      when larger than the output).
+      output, on a torus across its corner (``seed_block=(row, col, height, width)`` names
+      it instead; cropped, centred, when larger than the output).
     * Each pass collects the unfilled pixels with a filled 8-neighbour, shuffles them and
       sorts them (stably) by decreasing number of filled pixels in their window.
     * Each pixel, in that order, takes the centre of an exemplar window chosen by
