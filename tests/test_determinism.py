@@ -43,6 +43,8 @@ for name in sorted(texsyn.METHODS):
         exemplar, shape = big, (128, 120)
     out = texsyn.synthesize(exemplar, name, shape, rng=11, **params)
     print(name, digest(out))
+    if name == "efros_leung":  # grown on a torus (docs/tiling.md)
+        print(name + "-tileable", digest(texsyn.synthesize(exemplar, name, shape, rng=11, tileable=True, **params)))
 frames = [f.image for f in texsyn.animate(big, 3, (32, 32), rng=4, n_iterations=3)]
 print("animate", digest(np.stack(frames)))
 modified = texsyn.modify(layers[:32, :32], big, 0.1)
@@ -113,7 +115,13 @@ def _name(setting) -> str:
 def test_same_bytes_as_with_the_default_thread_count(hashes, setting):
     kernel, _ = setting
     reference = hashes[(kernel, None)]
-    assert set(reference) == set(texsyn.METHODS) | {"modify", "animate", "matmul", "ps_statistics"}
+    assert set(reference) == set(texsyn.METHODS) | {
+        "modify",
+        "animate",
+        "matmul",
+        "ps_statistics",
+        "efros_leung-tileable",
+    }
     differing = sorted(name for name in reference if hashes[setting][name] != reference[name])
     assert not differing, f"{_name(setting)} changes the output of {differing}"
 

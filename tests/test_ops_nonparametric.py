@@ -33,6 +33,32 @@ def test_schedule_never_batches_interacting_pixels():
                 assert batch_of[i] < batch_of[j]
 
 
+def test_schedule_on_a_torus_never_batches_pixels_that_interact_across_the_wraps():
+    rng = np.random.default_rng(1)
+    rows, cols = rng.integers(0, 30, 200), rng.integers(0, 24, 200)
+    radius = 2
+    batch_of, n_batches = schedule_batches(rows, cols, radius, 30, 24, 1000, True)
+    assert batch_of.min() == 0 and batch_of.max() == n_batches - 1
+    across = 0
+    for i in range(200):
+        for j in range(i + 1, 200):
+            dy, dx = abs(rows[i] - rows[j]), abs(cols[i] - cols[j])
+            if min(dy, 30 - dy) <= radius and min(dx, 24 - dx) <= radius:
+                assert batch_of[i] < batch_of[j]
+                across += dy > radius or dx > radius
+    assert across > 0  # pairs that interact only across a wrap were there
+    flat, _ = schedule_batches(rows, cols, radius, 30, 24, 1000)
+    assert not np.array_equal(flat, batch_of)
+
+
+def test_growth_on_a_torus_does_not_depend_on_the_batches(grey_exemplar):
+    sampler = NonParametricSampler(grey_exemplar, 5)
+    batched = grow_pixels(sampler, (21, 26), rng=np.random.default_rng(3), torus=True)
+    sequential = grow_pixels(sampler, (21, 26), rng=np.random.default_rng(3), max_batch=1, torus=True)
+    np.testing.assert_array_equal(batched[1], sequential[1])
+    np.testing.assert_array_equal(batched[0][..., 0], grey_exemplar[batched[1][..., 0], batched[1][..., 1]])
+
+
 def test_growth_fills_every_pixel_with_an_exemplar_value(grey_exemplar):
     values, source = grow_pixels(
         NonParametricSampler(grey_exemplar, 7), (30, 20), rng=np.random.default_rng(1)

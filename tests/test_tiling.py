@@ -11,9 +11,12 @@ import pytest
 
 import texsyn
 from texsyn.cli import main
+from texsyn.drivers import raster
 from texsyn.io import read_image
 from texsyn.methods._tiling import BAND_PATCH, quilted_seam_band, seam_band_width
 from texsyn.metrics import gradient_energy_ratio, mean_gradient, rms_gradient, sharpness_ratio
+from texsyn.ops.kcoherence import CoherentWindows
+from texsyn.ops.nonparametric import NonParametricSampler
 
 #: settings that keep the slow methods quick; the tiling does not depend on them
 FAST = {
@@ -283,7 +286,7 @@ def test_the_seam_band_of_a_method_that_does_not_copy_is_copied_not_blended(name
 
 def test_the_seam_band_fits_small_outputs_and_small_exemplars():
     tiny = texsyn.data.exemplar("gravel", size=20)
-    out = texsyn.synthesize(tiny, "efros_leung", (24, 30), rng=1, tileable=True, window_size=5)
+    out = texsyn.synthesize(tiny, "lg", (24, 30), rng=1, tileable=True, patch_size=10)
     assert out.shape == (24, 30) and seam_strength(out) <= 1.6
     assert seam_band_width(32) == 10 and seam_band_width(4) == 2
 
@@ -329,3 +332,92 @@ def test_a_tileable_material_stays_in_register(name, brick):
     out_albedo, out_height = result.images
     assert np.abs(out_height - 2.0 * out_albedo[..., 0]).max() < 1e-4
     assert seam_strength(out_albedo) <= SEAM_LIMIT and seam_strength(out_height) <= SEAM_LIMIT
+
+
+# ------------------------------------------------------------------ on a torus: efros_leung
+def wrap_coherence(source_map: np.ndarray) -> tuple[float, float]:
+    """How often a pixel's right (lower) neighbour across the wrap, and inside the output,
+    comes from the exemplar pixel right of (below) its own: the growth's copied runs."""
+    across = np.mean(
+        [
+            np.all(source_map[:, 0] == source_map[:, -1] + [0, 1], axis=-1).mean(),
+            np.all(source_map[0] == source_map[-1] + [1, 0], axis=-1).mean(),
+        ]
+    )
+    inside = np.mean(
+        [
+            np.all(source_map[:, 1:] == source_map[:, :-1] + [0, 1], axis=-1).mean(),
+            np.all(source_map[1:] == source_map[:-1] + [1, 0], axis=-1).mean(),
+        ]
+    )
+    return float(across), float(inside)
+
+
+def check_torus_tiles(model, exemplar: np.ndarray, size: int, seeds, sharpness_too: bool = True) -> None:
+    """A torus output: seams, the exact source map, its copied runs across the wraps, sharpness."""
+    assert model.tiling_for((size, size)) == "torus"
+    for seed in seeds:
+        result = model.sample_with_map((size, size), rng=seed, tileable=True)
+        strength = seam_strength(result.image)
+        assert strength <= SEAM_LIMIT, f"seed {seed}: seams {strength:.2f} x the interior's 90th percentile"
+        rows, cols = result.source_map[..., 0], result.source_map[..., 1]
+        np.testing.assert_array_equal(result.image, exemplar[rows, cols])
+        across, inside = wrap_coherence(result.source_map)
+        assert across >= 0.5 * inside, f"seed {seed}: runs across the wraps {across:.2f}, inside {inside:.2f}"
+        if sharpness_too:
+            sharpness = sharpness_ratio(result.image, exemplar)
+            assert 0.8 <= sharpness <= 1.2, f"seed {seed}: sharpness ratio {sharpness:.2f}"
+
+
+@pytest.mark.parametrize("search", ["exact", "approximate"])
+def test_efros_leung_grows_on_a_torus(search, brick):
+    model = texsyn.make_method("efros_leung", search=search).fit(brick)
+    assert model.tiling_for((128, 128)) == model.tiling_for((256, 256)) == "torus"
+    assert model.tiling_for((128, 10)) == "seam band"  # narrower than a window
+    assert texsyn.make_method("cwt").fit(brick).tiling_for((128, 128)) == "seam band"
+    if search == "exact":  # the approximate search is the parametrised test's above
+        check_torus_tiles(model, brick, 128, seeds=(0,))
+    else:  # what a plain output has across its edges
+        assert wrap_coherence(model.sample_with_map((128, 128), rng=0).source_map)[0] < 0.05
+
+
+def test_efros_leung_on_a_torus_is_the_same_bytes_twice_and_not_the_plain_output(brick):
+    model = texsyn.make_method("efros_leung", window_size=7).fit(brick)
+    first = model.sample_with_map((40, 48), rng=5, tileable=True)
+    again = model.sample_with_map((40, 48), rng=5, tileable=True)
+    np.testing.assert_array_equal(first.image, again.image)
+    np.testing.assert_array_equal(first.source_map, again.source_map)
+    assert not np.array_equal(first.image, model.sample((40, 48), rng=5))
+
+
+@pytest.mark.parametrize("search", [pytest.param("exact", marks=pytest.mark.slow), "approximate"])
+def test_efros_leung_with_the_wrap_ignored_fails_the_seam_check(search, brick, monkeypatch):
+    """Sabotage: the growth on the torus, but every pixel written only in place (no copy
+    across the wraps) and the compiled loops told nothing wraps: the windows and the
+    neighbours stop at the output's edges. The seam check must then fail."""
+
+    def write_in_place(self, rows, cols, values):
+        self.values[rows + self.r, cols + self.r] = values
+        self.filled[rows + self.r, cols + self.r] = True
+
+    def no_wrap(method):
+        def call(*args, **kwargs):
+            return method(*args, **{**kwargs, "wrap": False})
+
+        return call
+
+    monkeypatch.setattr(raster._Canvas, "write", write_in_place)
+    monkeypatch.setattr(NonParametricSampler, "fill_screened", no_wrap(NonParametricSampler.fill_screened))
+    monkeypatch.setattr(CoherentWindows, "grow_pass", no_wrap(CoherentWindows.grow_pass))
+    model = texsyn.make_method("efros_leung", search=search).fit(brick)
+    with pytest.raises(AssertionError, match="seams"):
+        check_torus_tiles(model, brick, 128, seeds=(0,))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("search", ["exact", "approximate"])
+def test_efros_leung_tiles_on_a_torus_at_256_on_two_seeds(search, brick):
+    model = texsyn.make_method("efros_leung", search=search).fit(brick)
+    check_torus_tiles(model, brick, 256, seeds=(0, 1), sharpness_too=False)
+    sharpness = sharpness_ratio(model.sample((256, 256), rng=0, tileable=True), brick)
+    assert 0.8 <= sharpness <= 1.2, f"sharpness ratio {sharpness:.2f}"

@@ -414,12 +414,13 @@ def grow_pixels(
     max_batch: int = 256,
     known: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
     guide: np.ndarray | None = None,
+    torus: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Grow a texture pixel by pixel from a seed (Efros and Leung 1999, section 2).
 
     * A small seed copied from a random place of the exemplar sits at the centre of the
-      output (``seed_block=(row, col, height, width)`` names it instead; cropped, centred,
-      when larger than the output).
+      output, on a torus across its corner (``seed_block=(row, col, height, width)`` names
+      it instead; cropped, centred, when larger than the output).
     * Each pass collects the unfilled pixels with a filled 8-neighbour, shuffles them and
       sorts them (stably) by decreasing number of filled pixels in their window.
     * Each pixel, in that order, takes the centre of an exemplar window chosen by
@@ -464,6 +465,12 @@ def grow_pixels(
         (:class:`~texsyn.ops.nonparametric.NonParametricSampler` ``guide``; guided
         synthesis, ``docs/editing.md``): every search gets the guide around its pixel
         (the borders repeated). The search is then the matrix product.
+    torus : bool
+        Grow the output on a torus, so that it tiles (``docs/tiling.md``, "On a torus"):
+        every window wraps around the output's edges (its values and known pixels across an
+        edge are those of the other side), a pixel's 8-neighbours and the pixels that
+        interact in a batch wrap too, so the filled region grows across the wraps. The
+        output must be at least ``window // 2`` a side; not with ``known`` or ``guide``.
 
     Returns
     -------
@@ -478,11 +485,14 @@ def grow_pixels(
     height, width = shape
     window = sampler.window
     r = window // 2
+    if torus and (known is not None or guide is not None or min(height, width) < r):
+        raise ValueError(f"a torus needs an output of at least {r} a side, without known pixels or a guide")
     canvas = _Canvas(
         np.zeros((height + 2 * r, width + 2 * r, channels)),
         np.zeros((height + 2 * r, width + 2 * r), dtype=bool),
         np.full((height, width, 2), -1, dtype=np.int64),
         r,
+        torus,
     )
     values, filled, source = canvas.values, canvas.filled, canvas.source
     if guide is not None:
@@ -518,7 +528,12 @@ def grow_pixels(
             near[:] = False
             for dy in range(3):
                 for dx in range(3):
-                    near[dy : dy + height, dx : dx + width] |= inner
+                    if torus:  # the padding holds the other side of each wrap
+                        near[1:-1, 1:-1] |= filled[
+                            r - 1 + dy : r - 1 + dy + height, r - 1 + dx : r - 1 + dx + width
+                        ]
+                    else:
+                        near[dy : dy + height, dx : dx + width] |= inner
             rows, cols = np.nonzero(near[1:-1, 1:-1] & ~inner)
             perm = rng.permutation(rows.size)
             rows, cols = rows[perm], cols[perm]
@@ -536,7 +551,8 @@ def grow_pixels(
 
 
 def _place_seed(canvas, ex, seed_size, seed_block, rng) -> int:
-    """The seed of :func:`grow_pixels` at the centre of the canvas; pixels placed."""
+    """The seed of :func:`grow_pixels` at the centre of the canvas (on a torus, across its
+    corner); pixels placed."""
     ex_h, ex_w = ex.shape[:2]
     height, width = canvas.source.shape[:2]
     r = canvas.r
@@ -549,10 +565,18 @@ def _place_seed(canvas, ex, seed_size, seed_block, rng) -> int:
             si, sh = si + (sh - height) // 2, height
         if sw > width:
             sj, sw = sj + (sw - width) // 2, width
+    seed_rows, seed_cols = np.meshgrid(np.arange(sh), np.arange(sw), indexing="ij")
+    if canvas.wrap:
+        # on a torus, centred on the corner where the output's edges cross: the fronts then
+        # meet last half a tile away, inside the tile, not along its edges
+        rows, cols = (seed_rows - sh // 2) % height, (seed_cols - sw // 2) % width
+        canvas.write(rows.ravel(), cols.ravel(), ex[si : si + sh, sj : sj + sw].reshape(sh * sw, -1))
+        canvas.source[rows, cols, 0] = seed_rows + si
+        canvas.source[rows, cols, 1] = seed_cols + sj
+        return sh * sw
     top, left = (height - sh) // 2, (width - sw) // 2
     canvas.values[top + r : top + r + sh, left + r : left + r + sw] = ex[si : si + sh, sj : sj + sw]
     canvas.filled[top + r : top + r + sh, left + r : left + r + sw] = True
-    seed_rows, seed_cols = np.meshgrid(np.arange(sh), np.arange(sw), indexing="ij")
     canvas.source[top : top + sh, left : left + sw, 0] = seed_rows + si
     canvas.source[top : top + sh, left : left + sw, 1] = seed_cols + sj
     return sh * sw
@@ -560,12 +584,17 @@ def _place_seed(canvas, ex, seed_size, seed_block, rng) -> int:
 
 @dataclass
 class _Canvas:
-    """What :func:`grow_pixels` grows: the padded values and mask, and the source map."""
+    """What :func:`grow_pixels` grows: the padded values and mask, and the source map.
+
+    On a torus (``wrap``) the padding is the other side of each wrap of the output, kept up
+    to date as pixels are written, so that every window reads across the edges.
+    """
 
     values: np.ndarray
     filled: np.ndarray
     source: np.ndarray
     r: int
+    wrap: bool = False
 
     def __post_init__(self) -> None:
         # the window around every output pixel, as views: indexing them copies whole windows
@@ -575,6 +604,27 @@ class _Canvas:
         )
         self.known_windows = np.lib.stride_tricks.sliding_window_view(self.filled, (window, window))
         self.guide_windows: np.ndarray | None = None  # the output's guide, for guided synthesis
+        # the samplers' compiled loops are told of a torus only when there is one (a sampler
+        # subclass written before the torus need not take the argument)
+        self.wrap_argument = {"wrap": True} if self.wrap else {}
+
+    def write(self, rows: np.ndarray, cols: np.ndarray, values: np.ndarray) -> None:
+        """Output pixels ``(rows, cols)`` take ``values`` and become known (and, on a torus,
+        their copies in the padding)."""
+        r = self.r
+        self.values[rows + r, cols + r] = values
+        self.filled[rows + r, cols + r] = True
+        if not self.wrap:
+            return
+        height, width = self.source.shape[:2]
+        for i in (-1, 0, 1):
+            for j in (-1, 0, 1):
+                at_rows, at_cols = rows + r + i * height, cols + r + j * width
+                inside = (
+                    (at_rows >= 0) & (at_rows < height + 2 * r) & (at_cols >= 0) & (at_cols < width + 2 * r)
+                )
+                self.values[at_rows[inside], at_cols[inside]] = values[inside]
+                self.filled[at_rows[inside], at_cols[inside]] = True
 
 
 class _ExactPass:
@@ -603,7 +653,7 @@ class _ExactPass:
     def __call__(self, rows, cols, uniforms, tolerance: float, threshold: float) -> int:
         sampler, canvas, r = self.sampler, self.canvas, self.canvas.r
         height, width = canvas.source.shape[:2]
-        batch_of, n_batches = schedule_batches(rows, cols, r, height, width, self.batch_cap)
+        batch_of, n_batches = schedule_batches(rows, cols, r, height, width, self.batch_cap, canvas.wrap)
         by_batch = np.argsort(batch_of, kind="stable")
         bounds = np.searchsorted(batch_of[by_batch], np.arange(n_batches + 1))
         rows, cols, uniforms = rows[by_batch], cols[by_batch], uniforms[by_batch]
@@ -628,6 +678,7 @@ class _ExactPass:
                     int(bounds[chunks.firsts[chunk]]),
                     tolerance,
                     threshold,
+                    **canvas.wrap_argument,
                 )
                 filled_now += written
                 if batch < stop:  # rounding could matter: the matrix-product search
@@ -637,7 +688,7 @@ class _ExactPass:
 
     def _match(self, rows, cols, uniforms, bounds, batch: int, tolerance: float, threshold: float) -> int:
         """Batch ``batch`` by :meth:`~texsyn.ops.nonparametric.NonParametricSampler.match`; pixels filled."""
-        sampler, canvas, r = self.sampler, self.canvas, self.canvas.r
+        sampler, canvas = self.sampler, self.canvas
         members = slice(int(bounds[batch]), int(bounds[batch + 1]))
         pr, pc = rows[members], cols[members]
         windows, known = np.moveaxis(canvas.value_windows[pr, pc], 1, 3), canvas.known_windows[pr, pc]
@@ -648,8 +699,7 @@ class _ExactPass:
             src, err = sampler.match_guided(windows, known, tolerance, uniforms[members], guides)
         ok = err <= threshold
         pr, pc, src = pr[ok], pc[ok], src[ok]
-        canvas.values[pr + r, pc + r] = sampler.exemplar[src[:, 0], src[:, 1]]
-        canvas.filled[pr + r, pc + r] = True
+        canvas.write(pr, pc, sampler.exemplar[src[:, 0], src[:, 1]])
         canvas.source[pr, pc] = src
         return int(ok.sum())
 
@@ -676,6 +726,7 @@ class _ApproximatePass:
             threshold,
             self.stamp,
             self.n_stamped,
+            **canvas.wrap_argument,
         )
         self.n_stamped += rows.size
         return int(np.count_nonzero(chosen >= 0))

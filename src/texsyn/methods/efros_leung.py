@@ -158,6 +158,26 @@ class EfrosLeung(TextureSynthesizer):
         )
         return values, source
 
+    def torus_for(self, shape: tuple[int, int]) -> bool:
+        """An output at least a window a side grows on a torus (``docs/tiling.md``, "On a torus")."""
+        return min(shape) >= self.window_size
+
+    def _sample_torus(self, shape, rng, callback):
+        """The growth of :meth:`_sample` on a torus: windows, neighbours and batches wrap
+        around the output's edges, so the region grows across them and the output tiles
+        (:func:`texsyn.drivers.raster.grow_pixels` ``torus``); exact and approximate search."""
+        values, source = grow_pixels(
+            self.sampler_,
+            shape,
+            tolerance=self.tolerance,
+            max_error=self.max_error,
+            seed_size=self.seed_size,
+            rng=rng,
+            reporter=Reporter(callback, "pixels"),
+            torus=True,
+        )
+        return values, source
+
     @fixed_order
     def fill(
         self,

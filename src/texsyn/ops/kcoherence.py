@@ -13,7 +13,7 @@ import numpy as np
 from .jit import jit
 from .linalg import matmul
 from .patches import as_channels
-from .window_screen import window_ssd
+from .window_screen import window_ssd, wrap_pixel
 
 __all__ = ["CoherentWindows"]
 
@@ -66,6 +66,7 @@ def _coherent_pass(
     accept,
     stamp,
     first_stamp,
+    wrap,
 ):  # pragma: no cover - compiled
     """One pass of the approximate growth, pixel by pixel in list order (see :class:`CoherentWindows`).
 
@@ -74,7 +75,10 @@ def _coherent_pass(
     continuations of its filled 8-neighbours' sources, moved inside the exemplar, and the
     ``similar`` windows of each; distances are exact (Gaussian-weighted SSD over the known
     pixels, per unit weight). ``stamp`` (one int per window) marks the candidates already
-    listed for a pixel. Returns, per pixel, the chosen window (``-1`` when refused).
+    listed for a pixel. With ``wrap`` the output is a torus: the neighbours and the padding
+    wrap around its edges, and every pixel written is copied across the wraps
+    (:func:`~texsyn.ops.window_screen.wrap_pixel`). Returns, per pixel, the chosen window
+    (``-1`` when refused).
     """
     w = gauss.shape[0]
     r = w // 2
@@ -90,6 +94,7 @@ def _coherent_pass(
     cand = np.empty(9 * (1 + n_similar), np.int64)
     dist = np.empty(9 * (1 + n_similar))
     chosen = np.full(rows.size, -1, np.int64)
+    height, width = source.shape[0], source.shape[1]
     for i in range(rows.size):
         top, left = rows[i], cols[i]
         count = 0
@@ -111,8 +116,11 @@ def _coherent_pass(
                 if not filled[top + r + dy, left + r + dx] or (dy == 0 and dx == 0):
                     continue
                 # the window whose centre continues this neighbour's source
-                a = min(max(source[top + dy, left + dx, 0] - dy - r, 0), grid_rows - 1)
-                b = min(max(source[top + dy, left + dx, 1] - dx - r, 0), grid_cols - 1)
+                ny, nx = top + dy, left + dx
+                if wrap:  # the neighbour across an edge of the torus
+                    ny, nx = ny % height, nx % width
+                a = min(max(source[ny, nx, 0] - dy - r, 0), grid_rows - 1)
+                b = min(max(source[ny, nx, 1] - dx - r, 0), grid_cols - 1)
                 j = a * grid_cols + b
                 for t in range(n_similar + 1):
                     if t > 0:
@@ -152,6 +160,8 @@ def _coherent_pass(
         for c in range(channels):
             values[top + r, left + r, c] = planes[c, a, b]
         filled[top + r, left + r] = True
+        if wrap:
+            wrap_pixel(values, filled, top + r, left + r, r)
         source[top, left, 0] = a
         source[top, left, 1] = b
     return chosen
@@ -232,6 +242,7 @@ class CoherentWindows:
         accept: float,
         stamp: np.ndarray,
         first_stamp: int,
+        wrap: bool = False,
     ) -> np.ndarray:
         """Fill the pixels of one pass of :func:`~texsyn.drivers.raster.grow_pixels`, in order.
 
@@ -251,6 +262,9 @@ class CoherentWindows:
             Marks of candidates already listed; values below ``first_stamp`` mean none.
         first_stamp : int
             Mark of the first pixel (the next pass starts at ``first_stamp + n``).
+        wrap : bool
+            The output is a torus (``docs/tiling.md``): a pixel's 8-neighbours wrap around
+            its edges, and every pixel written is copied across the wraps into the padding.
 
         Returns
         -------
@@ -272,5 +286,6 @@ class CoherentWindows:
             float(accept),
             stamp,
             first_stamp,
+            bool(wrap),
         )
         return chosen

@@ -36,12 +36,14 @@ __all__ = ["NonParametricSampler", "grow_texture", "schedule_batches"]
 
 
 @jit()
-def schedule_batches(rows, cols, radius, height, width, max_batch):
+def schedule_batches(rows, cols, radius, height, width, max_batch, wrap=False):
     """Split an ordered pixel list into batches that can be processed at once.
 
     A pixel joins the current batch only if no pixel of the batch and no earlier pixel not
     yet scheduled lies within Chebyshev distance ``radius``; processing the batches in order
-    then gives exactly the result of processing the pixels one by one in list order.
+    then gives exactly the result of processing the pixels one by one in list order. With
+    ``wrap``, the distance is measured on the torus of ``height x width`` (the output wraps
+    around its edges, ``docs/tiling.md``).
 
     Returns
     -------
@@ -69,6 +71,13 @@ def schedule_batches(rows, cols, radius, height, width, max_batch):
             else:
                 remaining[kept] = p
                 kept += 1
+            if (
+                wrap
+            ):  # the pixels within radius around the torus (pixel (y, x) is stamp[y + radius, x + radius])
+                for a in range(r0 - radius, r0 + radius + 1):
+                    for b in range(c0 - radius, c0 + radius + 1):
+                        stamp[(a % height) + radius, (b % width) + radius] = batch
+                continue
             for a in range(r0, r0 + 2 * radius + 1):
                 for b in range(c0, c0 + 2 * radius + 1):
                     stamp[a, b] = batch
@@ -329,6 +338,7 @@ class NonParametricSampler:
         chunk_start: int,
         tolerance: float,
         accept: float,
+        wrap: bool = False,
     ) -> tuple[int, int]:
         """:meth:`match_screened` for consecutive batches of a pass, writing the output.
 
@@ -336,7 +346,9 @@ class NonParametricSampler:
         written (values, mask, source map), in one compiled loop
         (:meth:`texsyn.ops.window_screen.ScreenBank.fill`, which gives the arguments);
         it stops before a batch whose choice the rounding of :meth:`match` could change,
-        which the caller then searches with :meth:`match`.
+        which the caller then searches with :meth:`match`. With ``wrap`` the output is a
+        torus, and each pixel written is copied across the wraps into the canvas's padding
+        (:func:`texsyn.ops.window_screen.wrap_pixel`).
 
         Returns
         -------
@@ -347,7 +359,17 @@ class NonParametricSampler:
         """
         assert self._screen is not None, "a sampler with allowed windows does not screen"
         return self._screen.fill(
-            canvas, filled, source, pixels, batches, screen, chunk_start, self.centres, tolerance, accept
+            canvas,
+            filled,
+            source,
+            pixels,
+            batches,
+            screen,
+            chunk_start,
+            self.centres,
+            tolerance,
+            accept,
+            wrap,
         )
 
     def grow(

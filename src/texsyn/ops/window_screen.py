@@ -23,7 +23,7 @@ import numpy as np
 from .jit import jit
 from .linalg import BLOCK_COLUMNS, fixed_order, parallel_map
 
-__all__ = ["ScreenBank", "WindowScreen", "gather_windows", "window_ssd"]
+__all__ = ["ScreenBank", "WindowScreen", "gather_windows", "window_ssd", "wrap_pixel"]
 
 #: float32 and float64 unit roundoff (half an ulp of 1)
 _U32 = 2.0**-24
@@ -380,6 +380,7 @@ def _fill_batches(
     safety,
     min_weight,
     n_first,
+    wrap,
 ):  # pragma: no cover - compiled
     """Batches ``batch`` to ``stop - 1`` of a pass, in order, by :func:`_choose_row`.
 
@@ -390,7 +391,8 @@ def _fill_batches(
     the centre of their window: its values in ``canvas``, True in ``filled``, its exemplar
     ``(row, col)`` (``centres``) in ``source``; they are written when the whole batch is
     chosen (its pixels do not see each other). Stops before writing a batch with an unsure
-    row.
+    row. With ``wrap`` (the output is a torus) every pixel written is copied across the
+    wraps into the padding too (:func:`wrap_pixel`).
 
     Returns
     -------
@@ -437,10 +439,34 @@ def _fill_batches(
                 for c in range(channels):
                     canvas[pr + r, pc + r, c] = planes[c, cy, cx]
                 filled[pr + r, pc + r] = True
+                if wrap:
+                    wrap_pixel(canvas, filled, pr + r, pc + r, r)
                 source[pr, pc, 0] = cy
                 source[pr, pc, 1] = cx
                 written += 1
     return stop, written
+
+
+@jit(nogil=True)
+def wrap_pixel(canvas, filled, row, col, radius):  # pragma: no cover - compiled
+    """Copy pixel ``(row, col)`` of a padded canvas (``radius`` on each side) and its mask to
+    the pixels that stand for it across the output's edges, where the output is a torus
+    (``docs/tiling.md``, "On a torus"): the padding then holds the other side of every wrap,
+    and a window reaching over an edge reads the pixels it wraps to. ``(row, col)`` is in
+    the output (``radius <= row < H + radius``); the output must be at least ``radius`` a side."""
+    height = canvas.shape[0] - 2 * radius
+    width = canvas.shape[1] - 2 * radius
+    for i in range(-1, 2):
+        a = row + i * height
+        if a < 0 or a >= canvas.shape[0]:
+            continue
+        for j in range(-1, 2):
+            b = col + j * width
+            if b < 0 or b >= canvas.shape[1] or (i == 0 and j == 0):
+                continue
+            filled[a, b] = filled[row, col]
+            for c in range(canvas.shape[2]):
+                canvas[a, b, c] = canvas[row, col, c]
 
 
 @jit(nogil=True)
@@ -782,6 +808,7 @@ class ScreenBank:
         centres: np.ndarray,
         tolerance: float,
         accept: float,
+        wrap: bool = False,
     ) -> tuple[int, int]:
         """Choose and write the pixels of consecutive batches of a pass, in order (:func:`_fill_batches`).
 
@@ -800,6 +827,9 @@ class ScreenBank:
         centres : ndarray of int64, shape (N, 2)
             The centre of every exemplar window.
         tolerance, accept : float
+        wrap : bool
+            The output is a torus: every pixel written is copied across the wraps into the
+            padding (:func:`wrap_pixel`).
 
         Returns
         -------
@@ -835,4 +865,5 @@ class ScreenBank:
             SPREAD_SAFETY,
             NEW_MIN_WEIGHT,
             _FIRST,
+            bool(wrap),
         )
