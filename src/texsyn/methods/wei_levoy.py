@@ -24,7 +24,16 @@ first ``r`` columns, whose toroidally wrapped neighbours at the end of the previ
 not synthesised yet (they hold the initial noise, as the wrapped rows of the first line do in
 the paper).
 
+Tileable outputs (``tileable=True``, ``docs/tiling.md``) are synthesised on a torus: the same
+pass, then at every level a second pass with the full, non-causal neighbourhood over the rows
+and columns around the wraps, whose first pass read the initial noise across them
+(:meth:`WeiLevoy._wrap_pass`).
+
 Levels are 0-based, the finest (the full-size image) first.
+
+Why this module is long: the paper's algorithm is one class whose steps share the fitted
+banks and the wavefront order -- the fit, the raster pass, its memory estimate and the
+torus's second pass -- and reads best in one place.
 
 References
 ----------
@@ -63,6 +72,9 @@ __all__ = ["WeiLevoy", "causal_offsets", "TSVQ"]  # TSVQ: from texsyn.ops.tsvq, 
 BOUNDED_SEARCH_ROWS = 2048
 #: ... unless more than this share of its rows have another row at the same place (ties)
 TWINNED_ROWS = 0.01
+#: on a torus, the rows and columns around each wrap synthesised again with the full
+#: neighbourhood: this many times ``window // 2``, centred on the wrap
+WRAP_BAND = 2
 
 
 def causal_offsets(window: int) -> np.ndarray:
@@ -233,6 +245,37 @@ class WeiLevoy(TextureSynthesizer):
 
     def _sample(self, shape, rng, callback):
         """Step 2: the output pyramid, coarse to fine; the finest level and its sources."""
+        return self._sample_levels(shape, rng, callback, torus=False)
+
+    def torus_for(self, shape: tuple[int, int]) -> bool:
+        """Whether a tileable output of ``shape`` is synthesised on a torus (``docs/tiling.md``).
+
+        Every level but the coarsest must halve exactly (a side divisible by
+        ``2 ** (levels - 1)``), so that a pixel's parent wraps with it, and the coarsest level
+        must hold a whole window and parent window (no pixel twice in one neighbourhood).
+        """
+        step = 2 ** (self.levels - 1)
+        coarsest = pyramid_sizes(shape, self.levels - 1)[-1]
+        return (
+            shape[0] % step == 0
+            and shape[1] % step == 0
+            and min(coarsest) >= max(self.window, self.parent_window)
+        )
+
+    def _sample_torus(self, shape, rng, callback):
+        """:meth:`_sample` on a torus: every level gets a second, non-causal pass across its wraps.
+
+        The raster pass already wraps every neighbourhood (section 2 of the paper), but the
+        first ``window // 2`` rows and columns of a level read, across the wrap, pixels that
+        still hold the initial noise. After that pass, those rows and columns are synthesised
+        again with the full ``window x window`` square at the level (and the parent square),
+        which now reads synthesised pixels on both sides of each wrap
+        (:meth:`_wrap_pass`; ``docs/methods/wei_levoy.md``, "Tileable outputs").
+        """
+        return self._sample_levels(shape, rng, callback, torus=True)
+
+    def _sample_levels(self, shape, rng, callback, *, torus: bool):
+        """The output pyramid, coarse to fine (the seam pass at each level on a torus)."""
         sizes = pyramid_sizes(shape, self.levels - 1)  # the output halved (rounded up) L - 1 times
         total = sum(h * w for h, w in sizes)
 
@@ -242,7 +285,10 @@ class WeiLevoy(TextureSynthesizer):
             reporter = Reporter(callback, f"level {self.levels - level}/{self.levels}", total)
             done = sum(h * w for h, w in sizes[level + 1 :])  # pixels of the coarser levels
             parent = None if coarser is None else coarser[0]
-            return self._synthesise_level(level, sizes[level], parent, rng, reporter, done)
+            image, source = self._synthesise_level(level, sizes[level], parent, rng, reporter, done)
+            if torus:
+                self._wrap_pass(level, image, source, parent)
+            return image, source
 
         out, source = coarse_to_fine(level_step, self.levels)[0]
         ex_w = self.pyramid_[0].shape[1]
@@ -320,3 +366,65 @@ class WeiLevoy(TextureSynthesizer):
             if t % 64 == 0:
                 reporter(done)
         return out, src
+
+    def _full_bank(self, level: int) -> tuple[np.ndarray, np.ndarray]:
+        """Every exemplar pixel's full neighbourhood vector at ``level`` and its squared norm:
+        the whole ``window x window`` square at the level, then the parent square."""
+        image = self.pyramid_[level]
+        rows, cols = np.divmod(np.arange(image.shape[0] * image.shape[1]), image.shape[1])
+        parts = [_gather(image, rows, cols, square_offsets(self.window))]
+        if level + 1 < self.levels:
+            parts.append(_gather(self.pyramid_[level + 1], rows // 2, cols // 2, self.parent_))
+        bank = np.ascontiguousarray(np.concatenate(parts, axis=1))
+        return bank, np.sum(bank * bank, axis=1)
+
+    def _wrap_pass(self, level: int, out: np.ndarray, src: np.ndarray, parent: np.ndarray | None) -> None:
+        """Synthesise again, in place, the pixels whose causal neighbourhoods met the noise
+        across a wrap: the first ``r = window // 2`` rows, then the first ``r`` columns.
+
+        Each pixel takes the exemplar pixel whose full neighbourhood (the ``window x window``
+        square at the level, all of it synthesised by now, and the parent square) is nearest,
+        on the torus. The rows go in raster order and the columns in column order, along
+        wavefronts ``x + (r + 1) y`` (``y + (r + 1) x`` for the columns): two pixels of one
+        wavefront are more than ``r`` apart in the other direction, so every pixel sees the
+        pixels revisited before it in that order, as a one-by-one pass would show it.
+        """
+        ex = self.pyramid_[level]
+        flat_ex = ex.reshape(-1, ex.shape[2])
+        bank, norms = self._full_bank(level)
+        tree = (
+            TSVQ(bank, self.leaf_size, np.random.default_rng(self.fit_rng)) if self.search == "tsvq" else None
+        )
+        index = None  # the same rows as the plain product, proven (see _fit)
+        if tree is None and len(bank) >= BOUNDED_SEARCH_ROWS:
+            index = BoundedNearestIndex(bank)
+        square = square_offsets(self.window)
+        h, w = out.shape[:2]
+        r = self.window // 2
+        slope = r + 1
+        n = WRAP_BAND * r  # the band's width, centred on each wrap
+        strip = np.arange(n)
+        # (k, j): k across the band, j along it; wavefront t = j + slope k
+        bands = [  # the rows around the horizontal wrap, then the columns around the vertical one
+            (lambda k, j: ((k - n // 2) % h, j), w),
+            (lambda k, j: ((j + n - n // 2) % h, (k - n // 2) % w), h - n),
+        ]
+        for place, length in bands:
+            for t in range(length + slope * (n - 1)):
+                along = t - slope * strip
+                ok = (along >= 0) & (along < length)
+                if not ok.any():
+                    continue
+                ys, xs = place(strip[ok], along[ok])
+                q = np.empty((ys.size, bank.shape[1]))
+                gather_wrapped(out, ys, xs, square, q)
+                if parent is not None:
+                    gather_wrapped(parent, ys // 2, xs // 2, self.parent_, q, len(square) * out.shape[2])
+                if tree is not None:
+                    best = tree.nearest(q)
+                elif index is not None:
+                    best = nearest_rows_bounded(q, bank, norms, index)
+                else:
+                    best = nearest_rows(q, bank, norms)
+                out[ys, xs] = flat_ex[best]
+                src[ys, xs] = best
