@@ -189,6 +189,23 @@ def test_a_method_periodic_by_construction_samples_as_usual(brick):
     assert not texsyn.make_method("patch_wavelet").fit(brick).periodic_for((96, 128))
 
 
+def test_grouplets_and_sparse_are_periodic_where_their_canvas_is(brick):
+    """Grouplets: periodic at every shape with a flow that wraps; sparse: where its working
+    canvas (whole patch grids) is the output itself. There the plain output tiles, and
+    ``tileable`` changes nothing."""
+    grouplets = texsyn.make_method("grouplets", n_iterations=2).fit(brick)
+    assert grouplets.tiling_for((97, 130)) == "periodic"
+    assert texsyn.make_method("grouplets", flow="vortex").fit(brick).tiling_for((97, 130)) == "seam band"
+    plain = grouplets.sample((97, 130), rng=2)
+    np.testing.assert_array_equal(grouplets.sample((97, 130), rng=2, tileable=True), plain)
+    assert seam_strength(plain) <= SEAM_LIMIT
+    sparse = texsyn.make_method("sparse", **FAST["sparse"]).fit(brick)
+    assert sparse.tiling_for((144, 168)) == "periodic" and sparse.tiling_for((128, 128)) == "seam band"
+    plain = sparse.sample((144, 168), rng=0)
+    np.testing.assert_array_equal(sparse.sample((144, 168), rng=0, tileable=True), plain)
+    assert seam_strength(plain) <= SEAM_LIMIT
+
+
 # ------------------------------------------------------------------ on a torus
 #: the methods that search and stitch on the output's torus themselves (docs/tiling.md), and
 #: the module whose fill_blocks lays their blocks
@@ -268,7 +285,9 @@ def test_the_seam_band_of_a_method_that_does_not_copy_is_copied_not_blended(name
     """No cross-fade, no blur: outside the band the method's pixels, inside it exemplar values
     (the 8-bit brick's levels, which the LG and sparse outputs' floats almost never hit).
     The seam and sharpness statistics alone pass a 16-pixel cross-fade of these methods' wraps."""
-    model = texsyn.make_method(name, **FAST.get(name, {})).fit(brick)
+    settings = {"grouplets": {"flow": "vortex"}}.get(name, FAST.get(name, {}))  # a flow that does not wrap
+    model = texsyn.make_method(name, **settings).fit(brick)
+    assert model.tiling_for((96, 80)) == "seam band"
     plain, tiled = model.sample((96, 80), rng=4), model.sample((96, 80), rng=4, tileable=True)
     half, reach = seam_band_width(BAND_PATCH) // 2, seam_band_width(BAND_PATCH)
     band = np.zeros((96, 80), dtype=bool)

@@ -293,6 +293,12 @@ class Grouplets(TextureSynthesizer):
             preview=preview,
         )
 
+    def periodic_for(self, shape):
+        """Every step is periodic (FFT pyramid and diffusion, wrapped association fields): the
+        output wraps whenever its flow does, the learned one (repeated periodically,
+        :meth:`flow_field`) or a constant direction (``docs/tiling.md``)."""
+        return self.flow == "learned" or self.flow.strip().lower().startswith("constant")
+
     def _sample(self, shape, rng, callback):
         return self._along(self.flow_field(shape), rng, callback), None
 

@@ -309,6 +309,12 @@ class ConstrainedSparse(TextureSynthesizer):
         q = self.step * 2 ** (self._scales - 1)
         return padded_canvas(shape, minimum=q * -(-2 * self.patch_size // self.step), multiple=q)
 
+    def periodic_for(self, shape):
+        """The patches lie on a periodic grid and the spectrum is imposed by FFT, on the working
+        canvas (:meth:`_canvas`): the output wraps when it is the canvas itself, sides that are
+        multiples of ``step * 2**(scales - 1)`` and at least two patches (``docs/tiling.md``)."""
+        return self._canvas(shape) == tuple(shape)
+
     def _sample(self, shape, rng, callback):
         """Algorithm 1, steps 3-4, from the coarsest scale to the finest (section 4.3).
 
