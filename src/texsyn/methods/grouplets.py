@@ -216,7 +216,8 @@ class Grouplets(TextureSynthesizer):
         k = float(h * w)
         bands = self._bands(c)
         depth = self.grouplet_levels
-        terms = {"exemplar and its sorted coefficients": 8.0 * bands * k + 40.0 * k * c}
+        # the sorted coefficients and pixels, and the exemplar's association fields (int64)
+        terms = {"exemplar and its sorted coefficients": 8.0 * bands * k + 40.0 * k * c + 8.0 * depth * k}
         if output_shape is None:
             terms["analysis of the exemplar"] = 12.0 * bands * k + 20.0 * depth * k + 100.0 * k + 24.0 * k * c
             return terms
@@ -294,7 +295,11 @@ class Grouplets(TextureSynthesizer):
         )
 
     def _sample(self, shape, rng, callback):
-        return self._along(self.flow_field(shape), rng, callback), None
+        model: GroupletModel = self.model_
+        flow = self.flow_field(shape)
+        # an exact tiling of the learned field reuses the exemplar's association fields
+        transform = model.tiled_transform(shape) if self.flow == "learned" else None
+        return self._along(flow, rng, callback, transform), None
 
     @fixed_order
     def synthesize_along(
@@ -321,13 +326,17 @@ class Grouplets(TextureSynthesizer):
         )
         return self._as_output(self._along(flow, normalize_rng(rng), callback))
 
-    def _along(self, flow, rng, callback):
-        """Table 1 from white noise along a raw flow; ``iteration`` records with the iterate."""
+    def _along(self, flow, rng, callback, transform: WaveletGroupletTransform | None = None):
+        """Table 1 from white noise along a raw flow; ``iteration`` records with the iterate.
+
+        ``transform``: the transform along ``flow`` when the caller has it already
+        (:meth:`GroupletModel.tiled_transform`)."""
         model: GroupletModel = self.model_
         h, w = flow.shape[:2]
         reporter = Reporter(callback, "iteration", self.n_iterations)
         noise = model.noise((h, w), rng)
-        transform = model.transform(flow)
+        if transform is None:
+            transform = model.transform(flow)
         channels = self._project(
             noise, transform, self.n_iterations, model.targets(h * w), reporter, model.to_image
         )
