@@ -24,22 +24,23 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import numpy as np
 
 from .._validation import OneOf, Range, check_output_shape, normalize_rng
 from ..drivers.alternating import alternate_projections
-from ..drivers.fluid import FlowDynamics, flow_sequence, looped_flow_sequence, texture_frames
 from ..errors import InputError
 from ..models.grouplets import GroupletModel, HistogramTargets
 from ..ops.flow import builtin_flow, periodic_tiling
-from ..ops.fluid import project, rescale_speed, spectral_velocity, vortex_velocity
 from ..ops.linalg import fixed_order
 from ..ops.progress import Reporter
 from ..transforms.grouplets import WaveletGroupletTransform
 from ._base import Progress, TextureSynthesizer
 from ._memory import output_bytes, pixel_count, shape_dims
+
+if TYPE_CHECKING:  # the fluid modules load with the first animation, not with the method
+    from ..drivers.fluid import FlowDynamics
 
 __all__ = ["Frame", "Grouplets", "GroupletModel"]
 
@@ -345,6 +346,8 @@ class Grouplets(TextureSynthesizer):
     # ------------------------------------------------------------------ dynamic synthesis
     def dynamics(self, shape: tuple[int, int]) -> FlowDynamics:
         """How the flow of an animation with frames of ``shape`` evolves (the parameters)."""
+        from ..drivers.fluid import FlowDynamics
+
         return FlowDynamics(
             tau=self.tau,
             viscosity=self.viscosity,
@@ -375,6 +378,8 @@ class Grouplets(TextureSynthesizer):
 
         The paper leaves the initial flow open (``docs/methods/grouplets.md``, "Deviations").
         """
+        from ..ops.fluid import project, rescale_speed, spectral_velocity, vortex_velocity
+
         scale = self._flow_scale(shape)
         if self.initial_flow == "learned":
             raw = self.flow_field(shape)
@@ -455,6 +460,8 @@ class Grouplets(TextureSynthesizer):
         self, n_frames: int, shape, rng: np.random.Generator, callback, closing: int
     ) -> Iterator[Frame]:
         """Table 2 through the fluid driver, with this model's synthesis and projection."""
+        from ..drivers.fluid import flow_sequence, looped_flow_sequence, texture_frames
+
         model: GroupletModel = self.model_
         targets = model.targets(shape[0] * shape[1])
         dynamics = self.dynamics(shape)
