@@ -296,10 +296,9 @@ class Grouplets(TextureSynthesizer):
         )
 
     def _sample(self, shape, rng, callback):
-        model: GroupletModel = self.model_
         flow = self.flow_field(shape)
         # an exact tiling of the learned field reuses the exemplar's association fields
-        transform = model.tiled_transform(shape) if self.flow == "learned" else None
+        transform = self.model_.tiled_transform(shape) if self.flow == "learned" else None
         return self._along(flow, rng, callback, transform), None
 
     @fixed_order
