@@ -368,6 +368,28 @@ def test_interleaved_flow_lines_give_the_associations_of_one_line_at_a_time(name
     assert np.array_equal(_integrate(ur, uc, mask, 4, 0.25, 7), alone)
 
 
+def test_an_exact_tiling_reuses_the_exemplars_association_fields(monkeypatch):
+    """A sample along the learned field tiled exactly moves the exemplar's association fields
+    by whole tiles instead of integrating the tiling again (issue 20): the same fields, so
+    the same image."""
+    from texsyn.models.grouplets import GroupletModel
+    from texsyn.ops.flow import tiled_associations
+
+    ex = texsyn.data.exemplar("brick", size=32)
+    method = texsyn.make_method("grouplets", n_iterations=2, colour="grey").fit(ex)
+    model = method.model_
+    shape = (64, 96)
+    tiled = tiled_associations(model.associations, model.shape, shape)
+    assert np.array_equal(tiled, association_fields(method.flow_field(shape), model.grouplet_levels))
+    assert tiled_associations(model.associations, model.shape, (48, 64)) is None  # not a multiple
+    long_lines = association_fields(model.flow, 5)  # lines of 16 pixels in a 32-pixel tile
+    assert tiled_associations(long_lines, model.shape, shape) is None
+    assert model.tiled_transform(shape) is not None
+    reused = method.sample(shape, rng=1)
+    monkeypatch.setattr(GroupletModel, "tiled_transform", lambda self, shape: None)
+    assert np.array_equal(method.sample(shape, rng=1), reused)
+
+
 @pytest.mark.parametrize("sigma", [0.5, 1.0, 2.5, 5.0, 9.0])
 def test_gaussian_wrap_is_scipys_gaussian_filter_byte_for_byte(sigma):
     """Issue 20: the structure tensor smooths with ``texsyn.ops.fourier.gaussian_wrap`` instead of

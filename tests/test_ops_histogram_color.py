@@ -118,11 +118,13 @@ def test_periodic_component_of_a_periodic_smooth_image_is_close_to_itself():
     assert np.abs(s).max() < 0.05
 
 
-@pytest.mark.parametrize("quantum", [None, 0.5, 0.1, "ulp"])
+@pytest.mark.parametrize("quantum", [None, 0.5, 0.1, "ulp", "sparse"])
 def test_numpy_and_compiled_rank_scatters_give_the_same_bytes(quantum):
     """``match_sorted_rows`` uses NumPy until numba is loaded (start-up, issue 20) and the
     compiled packed-key ranks after: both put equal values in position order, and values
-    that differ only in their last bits (a run of equal high key bits) in value order."""
+    that differ only in their last bits (a run of equal high key bits) in value order.
+    'sparse': a few short runs among distinct values, some across the blocks of keys the
+    compiled kernel passes over at once when they hold no run."""
     from texsyn.ops.histogram import _argsort_rows, _scatter_by_rank_numpy
     from texsyn.ops.ranks import scatter_by_key, sorted_keys
 
@@ -132,6 +134,11 @@ def test_numpy_and_compiled_rank_scatters_give_the_same_bytes(quantum):
         x = 1.0 + rng.integers(0, 50, x.shape) * 2.0**-52  # equal high bits, distinct values
         x[4, ::4] = -0.0
         x[4, 1::4] = 0.0
+    elif quantum == "sparse":
+        for row in x:
+            at = np.sort(rng.choice(row.size, (60, 2), replace=False), axis=1)
+            row[at[:, 1]] = row[at[:, 0]]  # pairs of equal values, and (below) pairs with
+            row[at[:50, 0]] = np.nextafter(row[at[:50, 0]], np.inf)  # equal high bits out of position order
     elif quantum is not None:
         x = np.round(x / quantum) * quantum
     x[2, :50] = 0.0  # a long run, and runs that reach the row's ends

@@ -24,22 +24,23 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import numpy as np
 
 from .._validation import OneOf, Range, check_output_shape, normalize_rng
 from ..drivers.alternating import alternate_projections
-from ..drivers.fluid import FlowDynamics, flow_sequence, looped_flow_sequence, texture_frames
 from ..errors import InputError
 from ..models.grouplets import GroupletModel, HistogramTargets
 from ..ops.flow import builtin_flow, periodic_tiling
-from ..ops.fluid import project, rescale_speed, spectral_velocity, vortex_velocity
 from ..ops.linalg import fixed_order
 from ..ops.progress import Reporter
 from ..transforms.grouplets import WaveletGroupletTransform
 from ._base import Progress, TextureSynthesizer
 from ._memory import output_bytes, pixel_count, shape_dims
+
+if TYPE_CHECKING:  # the fluid modules load with the first animation, not with the method
+    from ..drivers.fluid import FlowDynamics
 
 __all__ = ["Frame", "Grouplets", "GroupletModel"]
 
@@ -216,7 +217,8 @@ class Grouplets(TextureSynthesizer):
         k = float(h * w)
         bands = self._bands(c)
         depth = self.grouplet_levels
-        terms = {"exemplar and its sorted coefficients": 8.0 * bands * k + 40.0 * k * c}
+        # the sorted coefficients and pixels, and the exemplar's association fields (int64)
+        terms = {"exemplar and its sorted coefficients": 8.0 * bands * k + 40.0 * k * c + 8.0 * depth * k}
         if output_shape is None:
             terms["analysis of the exemplar"] = 12.0 * bands * k + 20.0 * depth * k + 100.0 * k + 24.0 * k * c
             return terms
@@ -300,7 +302,10 @@ class Grouplets(TextureSynthesizer):
         return self.flow == "learned" or self.flow.strip().lower().startswith("constant")
 
     def _sample(self, shape, rng, callback):
-        return self._along(self.flow_field(shape), rng, callback), None
+        flow = self.flow_field(shape)
+        # an exact tiling of the learned field reuses the exemplar's association fields
+        transform = self.model_.tiled_transform(shape) if self.flow == "learned" else None
+        return self._along(flow, rng, callback, transform), None
 
     @fixed_order
     def synthesize_along(
@@ -327,13 +332,17 @@ class Grouplets(TextureSynthesizer):
         )
         return self._as_output(self._along(flow, normalize_rng(rng), callback))
 
-    def _along(self, flow, rng, callback):
-        """Table 1 from white noise along a raw flow; ``iteration`` records with the iterate."""
+    def _along(self, flow, rng, callback, transform: WaveletGroupletTransform | None = None):
+        """Table 1 from white noise along a raw flow; ``iteration`` records with the iterate.
+
+        ``transform``: the transform along ``flow`` when the caller has it already
+        (:meth:`GroupletModel.tiled_transform`)."""
         model: GroupletModel = self.model_
         h, w = flow.shape[:2]
         reporter = Reporter(callback, "iteration", self.n_iterations)
         noise = model.noise((h, w), rng)
-        transform = model.transform(flow)
+        if transform is None:
+            transform = model.transform(flow)
         channels = self._project(
             noise, transform, self.n_iterations, model.targets(h * w), reporter, model.to_image
         )
@@ -342,6 +351,8 @@ class Grouplets(TextureSynthesizer):
     # ------------------------------------------------------------------ dynamic synthesis
     def dynamics(self, shape: tuple[int, int]) -> FlowDynamics:
         """How the flow of an animation with frames of ``shape`` evolves (the parameters)."""
+        from ..drivers.fluid import FlowDynamics
+
         return FlowDynamics(
             tau=self.tau,
             viscosity=self.viscosity,
@@ -372,6 +383,8 @@ class Grouplets(TextureSynthesizer):
 
         The paper leaves the initial flow open (``docs/methods/grouplets.md``, "Deviations").
         """
+        from ..ops.fluid import project, rescale_speed, spectral_velocity, vortex_velocity
+
         scale = self._flow_scale(shape)
         if self.initial_flow == "learned":
             raw = self.flow_field(shape)
@@ -452,6 +465,8 @@ class Grouplets(TextureSynthesizer):
         self, n_frames: int, shape, rng: np.random.Generator, callback, closing: int
     ) -> Iterator[Frame]:
         """Table 2 through the fluid driver, with this model's synthesis and projection."""
+        from ..drivers.fluid import flow_sequence, looped_flow_sequence, texture_frames
+
         model: GroupletModel = self.model_
         targets = model.targets(shape[0] * shape[1])
         dynamics = self.dynamics(shape)

@@ -19,12 +19,15 @@ import numpy as np
 
 from ..ops import luma, match_sorted_rows, periodic_smooth_decomposition
 from ..ops.color import ColorPCA, ColourSpace, colour_space
-from ..ops.flow import association_fields, orient_field, structure_tensor_orientation
+from ..ops.flow import association_fields, orient_field, structure_tensor_orientation, tiled_associations
 from ..ops.histogram import hist_target_rows
 from ..ops.progress import Reporter
 from ..transforms.grouplets import WaveletGroupletTransform
 
-__all__ = ["GroupletModel", "HistogramTargets", "ProjectionBuffers"]
+__all__ = ["ASSOCIATION_STEP", "GroupletModel", "HistogramTargets", "ProjectionBuffers"]
+
+#: integration step (pixels) of the association fields of the exemplar and of static syntheses
+ASSOCIATION_STEP = 0.25
 
 
 @dataclass(frozen=True)
@@ -141,6 +144,10 @@ class GroupletModel(metaclass=_LearnsFromExemplar):
     space : ColourSpace
         The colour coordinates synthesised (:func:`texsyn.ops.color.colour_space`): the
         principal axes of a colour exemplar, or its luma.
+    associations : ndarray of int64 (L, H*W), optional
+        The association fields of ``flow`` (:func:`texsyn.ops.flow.association_fields`, step
+        0.25), which an output tiling the exemplar's field exactly reuses
+        (:meth:`tiled_transform`). ``None`` in models made without them (round 1's pickles).
     """
 
     flow: np.ndarray
@@ -150,6 +157,7 @@ class GroupletModel(metaclass=_LearnsFromExemplar):
     levels: int
     grouplet_levels: int
     space: ColourSpace = ColourSpace("grey", 1)
+    associations: np.ndarray | None = None
 
     @property
     def pca(self) -> ColorPCA | None:
@@ -157,7 +165,9 @@ class GroupletModel(metaclass=_LearnsFromExemplar):
         return self.space.pca
 
     def __post_init__(self) -> None:
-        for name in ("flow", "coherence", "band_values", "pixel_values"):
+        for name in ("flow", "coherence", "band_values", "pixel_values", "associations"):
+            if name == "associations" and self.associations is None:
+                continue
             array = np.asarray(getattr(self, name))
             array.setflags(write=False)
             object.__setattr__(self, name, array)
@@ -214,7 +224,8 @@ class GroupletModel(metaclass=_LearnsFromExemplar):
             luma(periodic_img), sigma=sigma, presmooth=presmooth
         )
         flow = orient_field(orientation)
-        transform = _wavelet_grouplets(flow, int(levels), int(grouplet_levels))
+        associations = association_fields(flow, int(grouplet_levels), step=ASSOCIATION_STEP)
+        transform = _normalized_transform(associations, flow.shape[:2], int(levels))
         coefficients = transform.forward(periodic)  # (J+1, L+1, C, H, W)
         b = coefficients.reshape(coefficients.shape[:3] + (-1,))
         return cls(
@@ -225,6 +236,7 @@ class GroupletModel(metaclass=_LearnsFromExemplar):
             levels=int(levels),
             grouplet_levels=int(grouplet_levels),
             space=space,
+            associations=associations,
         )
 
     @property
@@ -237,14 +249,28 @@ class GroupletModel(metaclass=_LearnsFromExemplar):
         """Channels synthesised: 3 principal colour axes, or 1 grey channel."""
         return self.pixel_values.shape[0]
 
-    def transform(self, flow: np.ndarray, *, step: float = 0.25) -> WaveletGroupletTransform:
+    def transform(self, flow: np.ndarray, *, step: float = ASSOCIATION_STEP) -> WaveletGroupletTransform:
         """The wavelet-grouplet transform along ``flow`` (raw vectors, any size; section 2.3).
 
         ``step`` is the integration step of the association fields in pixels
         (:func:`texsyn.ops.flow.association_fields`).
         """
         flow = np.asarray(flow, dtype=np.float64)
-        return _wavelet_grouplets(flow, self.levels, self.grouplet_levels, step)
+        associations = association_fields(flow, self.grouplet_levels, step=step)
+        return _normalized_transform(associations, flow.shape[:2], self.levels)
+
+    def tiled_transform(self, shape: tuple[int, int]) -> WaveletGroupletTransform | None:
+        """The transform along the exemplar's flow tiled exactly to ``shape``
+        (:func:`texsyn.ops.flow.periodic_tiling` of a multiple of its size), from the
+        exemplar's association fields moved by whole tiles instead of integrated again
+        (:func:`texsyn.ops.flow.tiled_associations`); ``None`` where that does not apply
+        (then :meth:`transform` of the tiling)."""
+        if self.associations is None:
+            return None
+        associations = tiled_associations(self.associations, self.shape, shape)
+        if associations is None:
+            return None
+        return _normalized_transform(associations, (int(shape[0]), int(shape[1])), self.levels)
 
     def targets(self, n: int) -> HistogramTargets:
         """Sorted target values of every band and channel for ``n`` pixels (computed, not kept)."""
@@ -354,10 +380,9 @@ class GroupletModel(metaclass=_LearnsFromExemplar):
         )
 
 
-def _wavelet_grouplets(
-    flow: np.ndarray, levels: int, grouplet_levels: int, step: float = 0.25
+def _normalized_transform(
+    associations: np.ndarray, shape: tuple[int, int], levels: int
 ) -> WaveletGroupletTransform:
-    """The wavelet-grouplet transform along a raw flow: association fields, then the frame,
-    with normalised coefficients (``docs/methods/grouplets.md``, "Deviations")."""
-    associations = association_fields(flow, grouplet_levels, step=step)
-    return WaveletGroupletTransform(associations, flow.shape[:2], levels, normalized=True)
+    """The wavelet-grouplet frame of association fields, with normalised coefficients
+    (``docs/methods/grouplets.md``, "Deviations")."""
+    return WaveletGroupletTransform(associations, shape, levels, normalized=True)

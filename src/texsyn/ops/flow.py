@@ -4,6 +4,11 @@ The geometric layer of Peyré's grouplet model (Peyré 2008, section 2.1;
 ``docs/methods/grouplets.md``, "Geometric layer").
 Vector fields are arrays ``(H, W, 2)`` with ``(row, col)`` components; every operation is
 periodic.
+
+Why this module is long: the geometric layer is one chain (orientation, signs, tilings of a
+learned field, association fields and their tilings) whose steps share the conventions above
+and the integration's rules (rounding, stagnation points, wrapping); split apart, each part
+would have to restate them.
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ __all__ = [
     "orient_field",
     "periodic_tiling",
     "structure_tensor_orientation",
+    "tiled_associations",
 ]
 
 
@@ -330,6 +336,55 @@ def association_fields(flow: np.ndarray, levels: int, *, step: float = 0.25) -> 
         _integrate_lines(ur, uc, mask, int(levels), float(step), 0, out.shape[1], out)
         return out
     return _integrate(ur, uc, mask, int(levels), float(step), 4 * worker_count())
+
+
+def tiled_associations(
+    associations: np.ndarray, shape: tuple[int, int], out_shape: tuple[int, int]
+) -> np.ndarray | None:
+    """Association fields of a field tiled exactly (:func:`periodic_tiling` of a multiple of
+    its size), translated from the tile's own; ``None`` where they cannot be.
+
+    A flow line of the tiling is the tile's, moved by whole tiles: each pixel keeps the
+    displacement ``A_l(x) - x`` of its copy in the tile. The displacement is read modulo the
+    tile, so the lines must be shorter than half of it: ``2^(L-1) + 1 < min(h, w) / 2``
+    (otherwise, or when ``out_shape`` is not a multiple of ``shape``, ``None``: integrate the
+    tiling with :func:`association_fields`). Integrating the tiling again gives the same
+    fields but where a position lands within rounding of a pixel boundary, which depends on
+    the absolute coordinates (``docs/methods/grouplets.md``, "Performance").
+
+    Parameters
+    ----------
+    associations : ndarray of int, shape (L, h*w)
+        :func:`association_fields` of the tile.
+    shape : (int, int)
+        The tile's size ``(h, w)``.
+    out_shape : (int, int)
+        The tiling's size.
+
+    Returns
+    -------
+    ndarray of int64, shape (L, H*W), or None
+
+    Examples
+    --------
+    >>> flow = builtin_flow("constant:30", (16, 16))
+    >>> tiled = tiled_associations(association_fields(flow, 3), (16, 16), (32, 48))
+    >>> bool(np.array_equal(tiled, association_fields(np.tile(flow, (2, 3, 1)), 3)))
+    True
+    """
+    a = np.asarray(associations, dtype=np.int64)
+    h, w = int(shape[0]), int(shape[1])
+    out_h, out_w = int(out_shape[0]), int(out_shape[1])
+    levels = a.shape[0]
+    if out_h % h or out_w % w or (levels and 2 ** (levels - 1) + 1 >= min(h, w) / 2):
+        return None
+    rows = np.arange(out_h)[:, None]
+    cols = np.arange(out_w)[None, :]
+    source = a.reshape(levels, h, w)[:, rows % h, cols % w]  # the tile's targets, (L, H, W)
+    # displacements within the tile, in [-h/2, h/2) and [-w/2, w/2)
+    down = (source // w - rows % h + h // 2) % h - h // 2
+    across = (source % w - cols % w + w // 2) % w - w // 2
+    return (((rows + down) % out_h) * out_w + (cols + across) % out_w).reshape(levels, -1)
 
 
 def builtin_flow(name: str, shape: tuple[int, int]) -> np.ndarray:

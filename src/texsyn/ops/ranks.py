@@ -155,6 +155,21 @@ def _canonical_row(x, bits, keys, shift, order):
     return runs
 
 
+#: adjacent key pairs :func:`_canonical_keys` checks at once for a shared high part; runs are
+#: rare, so most blocks are passed over by one vectorised comparison
+_TIE_BLOCK = 64
+
+
+@jit()
+def _ties_in(keys, start, stop, s):
+    """Whether a key of ``keys[start:stop]`` shares its high bits (above ``s``) with the next
+    key. No early exit, so that the comparisons vectorise."""
+    found = 0
+    for k in range(start, stop):
+        found |= ((keys[k] ^ keys[k + 1]) >> s) == 0
+    return found != 0
+
+
 @jit()
 def _canonical_keys(x, bits, keys, shift):
     """Put a row's sorted keys in the canonical order of :func:`_canonical_row`, in place.
@@ -162,13 +177,17 @@ def _canonical_keys(x, bits, keys, shift):
     The keys of each run with equal high bits are in position order; a run whose values are
     not all equal is reordered, stably, by full value. Afterwards the keys' positions (low
     bits) are the row's positions by value, then by position, with no separate order array
-    (which, for a large row, would be fresh pages at every call).
+    (which, for a large row, would be fresh pages at every call). Blocks of
+    :data:`_TIE_BLOCK` keys without a run are passed over at once (:func:`_ties_in`).
     """
     n = keys.size
     s = np.uint64(shift)
     mask = (np.uint64(1) << s) - np.uint64(1)
     k = 0
     while k < n - 1:
+        if k + _TIE_BLOCK < n and not _ties_in(keys, k, k + _TIE_BLOCK, s):
+            k += _TIE_BLOCK
+            continue
         high = keys[k] >> s
         if (keys[k + 1] >> s) != high:
             k += 1
