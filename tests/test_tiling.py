@@ -254,6 +254,17 @@ def test_quilting_on_a_torus_cuts_across_the_wraps(brick):
     assert 0.5 < across_columns.mean() < 1 and 0.5 < across_rows.mean() < 1
 
 
+def test_quilting_fits_a_torus_at_the_sides_its_docs_say():
+    """docs/tiling.md: every side at least patch_size + 2, patch_size + 1 for an odd patch_size,
+    which must be 5 or at least 7."""
+    for patch_size in [5, *range(7, 49)]:
+        model = texsyn.make_method("quilting", patch_size=patch_size)
+        least = patch_size + 1 + (patch_size % 2 == 0)
+        for side in range(patch_size - 1, 3 * patch_size):
+            assert model.torus_for((side, 3 * patch_size)) == (side >= least), (patch_size, side)
+    assert not texsyn.make_method("quilting", patch_size=6).torus_for((11, 18))
+
+
 @pytest.mark.parametrize("name", sorted(TORUS_METHODS))
 def test_the_block_methods_tile_on_a_torus_not_with_a_band(name, brick):
     model = texsyn.make_method(name).fit(brick)
