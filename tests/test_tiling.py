@@ -93,6 +93,38 @@ def edge_spike(image: np.ndarray, offset: int, reach: int) -> float:
     return float(spikes[offsets == offset][0] / np.percentile(interior, 90))
 
 
+#: on a torus, no line of an exact source map (the wrap included) may change source along more
+#: than this share of its length: a block joined to its neighbour along a straight edge breaks
+#: the whole line (1.0, the last block pasted into the first without the every-side cut),
+#: quilting's minimum-error cuts break at most 0.47 of any line on brick at 128 and 256
+STRAIGHT_JOIN_LIMIT = 0.75
+
+
+def straight_join(source_map: np.ndarray) -> float:
+    """The largest share of a line of the torus (between two neighbouring columns or rows,
+    the wrap included) along which the source map is not the exemplar's next pixel."""
+    source = np.asarray(source_map, dtype=np.int64)
+    across_columns = np.any(np.roll(source, -1, axis=1) != source + [0, 1], axis=-1)
+    across_rows = np.any(np.roll(source, -1, axis=0) != source + [1, 0], axis=-1)
+    return float(max(across_columns.mean(axis=0).max(), across_rows.mean(axis=1).max()))
+
+
+def wrapped_join_offsets(model, size: int) -> list[int]:
+    """Offsets (as :func:`line_spikes` counts them) of the line where the last block of a row
+    (column) of the LG family's torus layout ends inside the first block (``docs/tiling.md``,
+    "On a torus"); none for the other methods, whose layouts differ per scale or which have
+    an exact source map (:func:`straight_join`)."""
+    if model.name not in ("lg", "clg", "rclg"):
+        return []
+    from texsyn.drivers.raster import torus_positions
+    from texsyn.methods.single_scale_gaussian import overlap_pixels, torus_free
+
+    n = model.patch_size
+    step = n - overlap_pixels(model.overlap, n, "overlap", warn=False)
+    corners = torus_positions(size, n, step, free=torus_free(n))
+    return [int(corners[-1] + n - size)]  # the line between that column (row) and the one before
+
+
 def check_method_tiles(name: str, exemplar: np.ndarray, size: int, seeds, sharpness_too: bool = True) -> None:
     model = texsyn.make_method(name, **FAST.get(name, {})).fit(exemplar)
     half_band = seam_band_width(min(BAND_PATCH, size, *exemplar.shape[:2])) // 2
@@ -104,15 +136,25 @@ def check_method_tiles(name: str, exemplar: np.ndarray, size: int, seeds, sharpn
             f"{name} seed {seed}: seams {strength:.2f} x the interior's 90th percentile"
         )
         if model.tiling_for((size, size)) == "torus":
-            # no band; the lines at the wrap are no spikier than every line away from it (a
-            # draw squeezed between two given sides measured 3-4x its neighbours there, the
-            # lines' own spikes reach 1.5-1.9)
+            # no band; the lines at the wrap, and the line where the last block of each row
+            # (column) ends inside the first, are no spikier than every line away from them (a
+            # draw squeezed between two given sides measured 3-4x its neighbours at the wrap, a
+            # straight join of the last block into the first 3.2-6.8x; the lines' own spikes
+            # reach 1.5-1.9, block joins up to 2.0)
             offsets, spikes = line_spikes(result.image)
-            farthest = spikes[np.abs(offsets) > 8].max()
-            for offset in (-1, 0):
+            at_wrap = [-1, 0, *wrapped_join_offsets(model, size)]
+            apart = np.abs(offsets[:, None] - np.array(at_wrap)[None, :]) % size  # lines repeat every size
+            distance = np.minimum(apart, size - apart).min(axis=1)
+            farthest = spikes[distance > 8].max()
+            for offset in at_wrap:
                 spike = spikes[offsets == offset][0]
                 assert spike <= farthest, (
                     f"{name} seed {seed}: the line {offset:+d} from the wrap is {spike:.2f}x its neighbours"
+                )
+            if result.source_map is not None:
+                broken = straight_join(result.source_map)
+                assert broken <= STRAIGHT_JOIN_LIMIT, (
+                    f"{name} seed {seed}: a line of the torus is broken along {broken:.0%} of its length"
                 )
         else:
             for offset in (-half_band, half_band):  # where the band meets the method's pixels
@@ -232,6 +274,17 @@ def test_quilting_on_a_torus_cuts_across_the_wraps(brick):
     assert 0.5 < across_columns.mean() < 1 and 0.5 < across_rows.mean() < 1
 
 
+def test_quilting_fits_a_torus_at_the_sides_its_docs_say():
+    """docs/tiling.md: every side at least patch_size + 2, patch_size + 1 for an odd patch_size,
+    which must be 5 or at least 7."""
+    for patch_size in [5, *range(7, 49)]:
+        model = texsyn.make_method("quilting", patch_size=patch_size)
+        least = patch_size + 1 + (patch_size % 2 == 0)
+        for side in range(patch_size - 1, 3 * patch_size):
+            assert model.torus_for((side, 3 * patch_size)) == (side >= least), (patch_size, side)
+    assert not texsyn.make_method("quilting", patch_size=6).torus_for((11, 18))
+
+
 @pytest.mark.parametrize("name", sorted(TORUS_METHODS))
 def test_the_block_methods_tile_on_a_torus_not_with_a_band(name, brick):
     model = texsyn.make_method(name).fit(brick)
@@ -259,6 +312,50 @@ def test_the_seam_check_fails_a_torus_method_whose_blocks_do_not_wrap(name, bric
         monkeypatch.setattr(f"{module}.fill_blocks", _blocks_without_wrap)
     model = texsyn.make_method(name).fit(brick)
     assert seam_strength(model.sample((128, 128), rng=0, tileable=True)) > SEAM_LIMIT  # the check fails
+
+
+def _leading_known_only(block):
+    """The block as a plane's raster loop would see it: only its known strips on the left and
+    at the top, the wrapped ones on the right and at the bottom forgotten."""
+    from texsyn.drivers.raster import Block
+    from texsyn.ops.seams import leading_known
+
+    left, top = leading_known(block.known)
+    known = np.zeros_like(block.known)
+    known[:, :left], known[:top] = block.known[:, :left], block.known[:top]
+    return Block(block.row, block.col, block.values, known)
+
+
+@pytest.mark.parametrize("name", ["quilting", "lg"])
+def test_the_torus_check_fails_blocks_pasted_into_the_first_without_the_every_side_cut(
+    name, brick, monkeypatch
+):
+    """The last block of a row overwrites the first block's strip along a straight edge: the
+    source map breaks along a whole line (quilting), the line there spikes 1.9-5.5x (LG)."""
+    import texsyn.methods.quilting as quilting
+    import texsyn.methods.single_scale_gaussian as single_scale_gaussian
+    from texsyn.ops.seams import cut_mask
+
+    monkeypatch.setattr(quilting, "cut_mask", lambda old, new, known, every_side: cut_mask(old, new, known))
+    monkeypatch.setitem(single_scale_gaussian.PASTE_TORUS, "quilt", single_scale_gaussian.PASTE["quilt"])
+    with pytest.raises(AssertionError, match="broken along|from the wrap"):
+        check_method_tiles(name, brick, 128, seeds=(0,), sharpness_too=False)
+
+
+@pytest.mark.parametrize("name", ["clg", "rclg"])
+def test_the_torus_check_fails_a_draw_blind_to_the_wrapped_pixels(name, brick, monkeypatch):
+    """Conditioned on the left and top strips only, the last block's draw meets the first
+    block along a straight line that spikes 5-7x its neighbours."""
+    import texsyn.methods.single_scale_gaussian as single_scale_gaussian
+
+    drawn = single_scale_gaussian.conditional_patch
+    monkeypatch.setattr(
+        single_scale_gaussian,
+        "conditional_patch",
+        lambda block, *args, **options: drawn(_leading_known_only(block), *args, **options),
+    )
+    with pytest.raises(AssertionError, match="from the wrap"):
+        check_method_tiles(name, brick, 128, seeds=(0,), sharpness_too=False)
 
 
 # ------------------------------------------------------------------ the quilted seam band

@@ -50,6 +50,7 @@ __all__ = [
     "Block",
     "block_canvas",
     "block_positions",
+    "block_window",
     "fill_block_rows",
     "fill_blocks",
     "grow_pixels",
@@ -173,6 +174,21 @@ def torus_fits(length: int, size: int, step: int, *, free: int = 1) -> bool:
     return bool(2 * steps.min() >= size + max(1, int(free)) and steps.max() < size)
 
 
+def block_window(row: int, col: int, size: int, shape: tuple[int, int], *, torus: bool = False) -> Any:
+    """Index of the ``size`` x ``size`` block at ``(row, col)`` of a canvas of ``shape``: slices
+    (a view), or on a torus its rows and columns wrapped across the edges (``np.ix_``: a copy).
+
+    Examples
+    --------
+    >>> canvas = np.arange(16).reshape(4, 4)
+    >>> canvas[block_window(3, 3, 2, (4, 4), torus=True)].tolist()
+    [[15, 12], [3, 0]]
+    """
+    if torus:
+        return np.ix_((row + np.arange(size)) % shape[0], (col + np.arange(size)) % shape[1])
+    return slice(row, row + size), slice(col, col + size)
+
+
 def fill_blocks(
     canvas: np.ndarray,
     rows: Sequence[int] | np.ndarray,
@@ -233,10 +249,7 @@ def fill_blocks(
     height, width = known.shape
     for x in rows:
         for y in cols:
-            if torus:  # the block's pixels across the wraps, as copies written back below
-                at: Any = np.ix_((x + np.arange(size)) % height, (y + np.arange(size)) % width)
-            else:
-                at = (slice(x, x + size), slice(y, y + size))
+            at = block_window(x, y, size, (height, width), torus=torus)  # on a torus: copies, written back
             window, mask = canvas[at], known[at]
             if skip_known and mask.all():
                 done += 1

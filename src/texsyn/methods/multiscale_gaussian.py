@@ -32,7 +32,14 @@ import numpy as np
 
 from .._validation import OneOf, Range
 from ..drivers.coarse_to_fine import coarse_to_fine
-from ..drivers.raster import Block, fill_blocks, raster_positions, torus_fits, torus_positions
+from ..drivers.raster import (
+    Block,
+    block_window,
+    fill_blocks,
+    raster_positions,
+    torus_fits,
+    torus_positions,
+)
 from ..errors import InputError
 from ..models.gaussian import PatchSource
 from ..models.histograms import SubbandHistograms, subband_histograms
@@ -356,10 +363,7 @@ class MSLG(TextureSynthesizer):
         def choose(block: Block) -> np.ndarray:
             # the joint distance of eq. (14): overlap term and low-resolution term, as channels
             x, y, mask = block.row, block.col, block.known
-            if torus:
-                under = low[np.ix_((x + np.arange(n)) % height, (y + np.arange(n)) % width)]
-            else:
-                under = low[x : x + n, y : y + n]
+            under = low[block_window(x, y, n, (height, width), torus=torus)]
             k = int(mask.sum()) * channels
             over = np.broadcast_to(mask[..., None] / max(k, 1), (n, n, channels))
             weights = np.concatenate([over, low_weight], axis=2)

@@ -233,8 +233,8 @@ class Quilting(TextureSynthesizer):
 
     def torus_for(self, shape: tuple[int, int]) -> bool:
         """True where every step between blocks on the torus is more than half a block
-        (with the default overlap, an output side of at least ``patch_size + 2`` pixels and
-        a ``patch_size`` of at least 7)."""
+        (with the default overlap, every output side at least ``patch_size + 2`` pixels,
+        ``patch_size + 1`` for an odd ``patch_size``, which must be 5 or at least 7)."""
         return self._torus_steps(shape) is not None
 
     def _sample_torus(self, shape, rng, callback):
