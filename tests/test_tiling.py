@@ -93,8 +93,9 @@ def edge_spike(image: np.ndarray, offset: int, reach: int) -> float:
     return float(spikes[offsets == offset][0] / np.percentile(interior, 90))
 
 
-#: on a torus, no line of an exact source map (the wrap included) may change source along more
-#: than this share of its length: a block joined to its neighbour along a straight edge breaks
+#: on a torus, no line of quilting's source map (the wrap included) may change source along more
+#: than this share of its length (the pixel methods copy short runs: a plain Wei-Levoy output
+#: has lines broken along 0.78-0.90): a block joined to its neighbour along a straight edge breaks
 #: the whole line (1.0, the last block pasted into the first without the every-side cut),
 #: quilting's minimum-error cuts break at most 0.47 of any line on brick at 128 and 256
 STRAIGHT_JOIN_LIMIT = 0.75
@@ -151,7 +152,7 @@ def check_method_tiles(name: str, exemplar: np.ndarray, size: int, seeds, sharpn
                 assert spike <= farthest, (
                     f"{name} seed {seed}: the line {offset:+d} from the wrap is {spike:.2f}x its neighbours"
                 )
-            if result.source_map is not None:
+            if name == "quilting":  # blocks: long runs, broken only along cuts
                 broken = straight_join(result.source_map)
                 assert broken <= STRAIGHT_JOIN_LIMIT, (
                     f"{name} seed {seed}: a line of the torus is broken along {broken:.0%} of its length"
