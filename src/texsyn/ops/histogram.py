@@ -280,7 +280,8 @@ def match_histogram(
 class HistogramMatcher:
     """Impose fixed per-channel histograms, optionally along principal colour axes.
 
-    The targets for ``n_values`` samples per channel are computed once (:func:`hist_target`), so an
+    The targets for ``n_values`` samples per channel are computed once (:func:`hist_target`;
+    :func:`hist_target_rows`, the same bytes, when the channels' references are alike), so an
     iterative method can project at every step at the cost of one sort per channel; the
     channels are ranked together, as the rows of one :func:`match_sorted_rows` call (split
     over the worker threads; each row is ranked alone, so the bytes are those of
@@ -299,9 +300,13 @@ class HistogramMatcher:
 
     def __init__(self, sorted_values, n_values: int, *, pca: ColorPCA | None = None, method: str = "ot"):
         self.pca = pca
-        self._stacked = np.empty((len(sorted_values), n_values))  # one row per channel
-        for c, values in enumerate(sorted_values):
-            self._stacked[c] = hist_target(n_values, values, method=method, presorted=True)
+        sizes = {np.size(values) for values in sorted_values}
+        if method == "ot" and len(sizes) == 1 and 0 not in sizes:  # one row per channel, compiled
+            self._stacked = hist_target_rows(n_values, np.stack([np.ravel(v) for v in sorted_values]))
+        else:
+            self._stacked = np.empty((len(sorted_values), n_values))
+            for c, values in enumerate(sorted_values):
+                self._stacked[c] = hist_target(n_values, values, method=method, presorted=True)
         self.targets = list(self._stacked)
 
     def __call__(self, image: np.ndarray, rng: np.random.Generator | None = None) -> np.ndarray:
