@@ -240,14 +240,21 @@ class SteerablePyramid:
         img = self._check(image)
         planes = np.ascontiguousarray(np.moveaxis(img, -1, 0)) if img.ndim == 3 else img
         spec = np.fft.rfft2(planes)
-        highpass = np.fft.irfft2(spec * self._hi0, s=self.shape)
-        low = spec * self._lo0
+        product = spec * self._hi0  # one buffer for a level's filtered spectra (fewer fresh pages)
+        highpass = np.fft.irfft2(product, s=self.shape)
+        low = np.multiply(spec, self._lo0, out=spec)
         bands = []
         for level in range(self.n_scales):
             size = self.sizes[level]
             lo, oriented = self._filters[level]
-            bands.append([_channels_last(np.fft.irfft2(low * g, s=size), img.ndim) for g in oriented])
-            low = self._down(low * lo, size, self.sizes[level + 1])
+            product = np.empty_like(low) if level else product
+            bands.append(
+                [
+                    _channels_last(np.fft.irfft2(np.multiply(low, g, out=product), s=size), img.ndim)
+                    for g in oriented
+                ]
+            )
+            low = self._down(np.multiply(low, lo, out=low), size, self.sizes[level + 1])
         lowpass = np.fft.irfft2(low, s=self.sizes[-1])
         return Pyramid(
             highpass=_channels_last(highpass, img.ndim),
@@ -265,11 +272,15 @@ class SteerablePyramid:
         for level in reversed(range(self.n_scales)):
             size = self.sizes[level]
             lo, oriented = self._filters[level]
-            low = self._up(low, self.sizes[level + 1], size) * lo
+            low = self._up(low, self.sizes[level + 1], size)
+            low *= lo
+            conjugate = np.empty_like(oriented[0])
             for g, band in zip(oriented, pyramid.bands[level]):
-                low += np.fft.rfft2(_channels_first(band, nd)) * np.conj(g)
-        spec = low * self._lo0
-        spec += np.fft.rfft2(_channels_first(pyramid.highpass, nd)) * self._hi0
+                spectrum = np.fft.rfft2(_channels_first(band, nd))
+                low += np.multiply(spectrum, np.conjugate(g, out=conjugate), out=spectrum)
+        spec = np.multiply(low, self._lo0, out=low)
+        spectrum = np.fft.rfft2(_channels_first(pyramid.highpass, nd))
+        spec += np.multiply(spectrum, self._hi0, out=spectrum)
         return _channels_last(np.fft.irfft2(spec, s=self.shape), nd)
 
     @staticmethod
