@@ -79,6 +79,13 @@ def test_steerable_pyramid_channels_are_the_bytes_of_each_channel_alone():
     for key in coeffs.keys():  # channels-last copies: the same reconstruction
         coeffs[key] = np.ascontiguousarray(coeffs[key])
     assert pyr.inverse(coeffs).tobytes() == image.tobytes()
+    previous = pyr.forward(x[::-1].copy())  # its arrays receive the next analysis
+    again = pyr.forward(x, out=previous)
+    for key in coeffs.keys():
+        assert again[key].tobytes() == coeffs[key].tobytes()
+    assert np.shares_memory(again[0, 1], previous[0, 1]) and np.shares_memory(
+        again.highpass, previous.highpass
+    )
 
 
 def test_steerable_pyramid_bands_are_oriented():

@@ -228,8 +228,13 @@ class SteerablePyramid:
             raise ValueError(f"image shape {img.shape[:2]} does not match the pyramid's {self.shape}")
         return img
 
-    def forward(self, image: np.ndarray) -> Pyramid:
+    def forward(self, image: np.ndarray, *, out: Pyramid | None = None) -> Pyramid:
         """Analyse an image into a :class:`Pyramid`.
+
+        ``out``, a :class:`Pyramid` that ``forward`` gave earlier for an image of the same
+        shape and that is no longer needed, receives the coefficients in its arrays (an
+        iterative method reuses them instead of faulting in fresh pages: arrays of 32 MiB and
+        more are mapped afresh at every allocation; issue 20). Same bytes either way.
 
         The channels of an ``(H, W, C)`` image are transformed as contiguous ``(C, H, W)``
         planes (the coefficients are ``(h, w, C)`` views of such planes): the transforms
@@ -241,26 +246,26 @@ class SteerablePyramid:
         planes = np.ascontiguousarray(np.moveaxis(img, -1, 0)) if img.ndim == 3 else img
         spec = np.fft.rfft2(planes)
         product = spec * self._hi0  # one buffer for a level's filtered spectra (fewer fresh pages)
-        highpass = np.fft.irfft2(product, s=self.shape)
+        half = np.empty_like(product)  # and one for their column transforms
+        nd = img.ndim
+        highpass = _irfft2(product, self.shape, half, None if out is None else out.highpass, nd)
         low = np.multiply(spec, self._lo0, out=spec)
         bands = []
         for level in range(self.n_scales):
             size = self.sizes[level]
             lo, oriented = self._filters[level]
-            product = np.empty_like(low) if level else product
+            if level:
+                product, half = np.empty_like(low), np.empty_like(low)
+            previous = [None] * len(oriented) if out is None else out.bands[level]
             bands.append(
                 [
-                    _channels_last(np.fft.irfft2(np.multiply(low, g, out=product), s=size), img.ndim)
-                    for g in oriented
+                    _irfft2(np.multiply(low, g, out=product), size, half, reuse, nd)
+                    for g, reuse in zip(oriented, previous)
                 ]
             )
             low = self._down(np.multiply(low, lo, out=low), size, self.sizes[level + 1])
         lowpass = np.fft.irfft2(low, s=self.sizes[-1])
-        return Pyramid(
-            highpass=_channels_last(highpass, img.ndim),
-            bands=bands,
-            lowpass=_channels_last(lowpass, img.ndim),
-        )
+        return Pyramid(highpass=highpass, bands=bands, lowpass=_channels_last(lowpass, nd))
 
     def inverse(self, pyramid: Pyramid) -> np.ndarray:
         """Synthesise the image from its coefficients (adjoint of :meth:`forward`; channels as
@@ -275,11 +280,12 @@ class SteerablePyramid:
             low = self._up(low, self.sizes[level + 1], size)
             low *= lo
             conjugate = np.empty_like(oriented[0])
+            rows, spectrum = np.empty_like(low), np.empty_like(low)  # the bands' transforms
             for g, band in zip(oriented, pyramid.bands[level]):
-                spectrum = np.fft.rfft2(_channels_first(band, nd))
+                _rfft2(_channels_first(band, nd), rows, spectrum)
                 low += np.multiply(spectrum, np.conjugate(g, out=conjugate), out=spectrum)
         spec = np.multiply(low, self._lo0, out=low)
-        spectrum = np.fft.rfft2(_channels_first(pyramid.highpass, nd))
+        spectrum = _rfft2(_channels_first(pyramid.highpass, nd), rows, spectrum)
         spec += np.multiply(spectrum, self._hi0, out=spectrum)
         return _channels_last(np.fft.irfft2(spec, s=self.shape), nd)
 
@@ -297,6 +303,24 @@ class SteerablePyramid:
         scale = (fine[0] * fine[1]) / (coarse[0] * coarse[1])
         out[..., rows, : coarse[1] // 2 + 1] = spec * scale
         return out
+
+
+def _rfft2(x: np.ndarray, rows: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """``numpy.fft.rfft2(x)`` in ``out`` (its two passes, as ``rfft2`` makes them: the rows'
+    real transforms, in ``rows``, then the columns')."""
+    np.fft.rfft(x, axis=-1, out=rows)
+    return np.fft.fft(rows, axis=-2, out=out)
+
+
+def _irfft2(
+    spectrum: np.ndarray, size: tuple[int, int], half: np.ndarray, reuse: np.ndarray | None, ndim: int
+) -> np.ndarray:
+    """``numpy.fft.irfft2(spectrum, s=size)`` as an ``(h, w, C)`` view of ``(C, h, w)`` planes:
+    its two passes, as ``irfft2`` makes them (the columns' transforms, in ``half``, then the
+    rows' real ones), the result written into ``reuse`` (such a view) when given."""
+    np.fft.ifft(spectrum, n=size[0], axis=-2, out=half)
+    planes = None if reuse is None else _channels_first(reuse, ndim)
+    return _channels_last(np.fft.irfft(half, n=size[1], axis=-1, out=planes), ndim)
 
 
 def _channels_last(planes: np.ndarray, ndim: int) -> np.ndarray:
