@@ -3,6 +3,7 @@ import pytest
 
 from texsyn.ops import (
     ColorPCA,
+    HistogramMatcher,
     hist_target,
     match_histogram,
     match_histogram_pca,
@@ -206,3 +207,24 @@ def test_expect_ranks_loads_the_compiled_ranks_for_a_large_total_only():
     assert expect_ranks(10) == compiled_ranks(10)
     assert expect_ranks(COMPILED_SCATTER_VALUES)
     assert compiled_ranks(10)
+
+
+def test_histogram_matcher_in_place_with_scratch_keys_gives_the_same_bytes():
+    """Issue 20: Heeger-Bergen matches its subbands in place with reused key scratch; the
+    result is the copy's, byte for byte, written into the (C, H, W) planes it came from."""
+    rng = np.random.default_rng(3)
+    references = [np.sort(rng.standard_normal(150)) for _ in range(2)]
+    matcher = HistogramMatcher(references, 12 * 10)
+    planes = rng.standard_normal((2, 12, 10))
+    planes[0, :3] = 0.25  # ties, ranked by position
+    image = np.moveaxis(planes, 0, -1)  # (H, W, C) view of the planes
+    expected = matcher(image.copy())
+    keys = np.full((2, 120), 7, dtype=np.uint64)
+    out = matcher(image, overwrite=True, keys=keys)
+    assert out.tobytes() == expected.tobytes()
+    assert np.shares_memory(out, planes) and planes.tobytes() == np.moveaxis(expected, -1, 0).tobytes()
+    channels_last = rng.standard_normal((12, 10, 2))  # rows not contiguous: a new array
+    before = channels_last.copy()
+    out = matcher(channels_last, overwrite=True, keys=keys)
+    assert not np.shares_memory(out, channels_last) and channels_last.tobytes() == before.tobytes()
+    assert out.tobytes() == matcher(before).tobytes()

@@ -61,6 +61,33 @@ def test_steerable_pyramid_perfect_reconstruction(shape):
     np.testing.assert_allclose(pyr.inverse(coeffs), x, atol=1e-10)
 
 
+def test_steerable_pyramid_channels_are_the_bytes_of_each_channel_alone():
+    """Issue 20: the channels are transformed as (C, H, W) planes; each channel's coefficients
+    and reconstruction are those of its own 2-D pyramid, byte for byte, and the channels'
+    (H, W, C) coefficients are accepted in any memory layout."""
+    x = np.random.default_rng(6).random((33, 40, 3))
+    pyr = SteerablePyramid((33, 40), n_scales=3, n_orientations=4)
+    coeffs = pyr.forward(x)
+    alone = [pyr.forward(x[..., c]) for c in range(3)]
+    for key in coeffs.keys():
+        assert coeffs[key].shape == alone[0][key].shape + (3,)
+        for c in range(3):
+            assert coeffs[key][..., c].tobytes() == alone[c][key].tobytes()
+    image = pyr.inverse(coeffs)
+    for c in range(3):
+        assert image[..., c].tobytes() == pyr.inverse(alone[c]).tobytes()
+    for key in coeffs.keys():  # channels-last copies: the same reconstruction
+        coeffs[key] = np.ascontiguousarray(coeffs[key])
+    assert pyr.inverse(coeffs).tobytes() == image.tobytes()
+    previous = pyr.forward(x[::-1].copy())  # its arrays receive the next analysis
+    again = pyr.forward(x, out=previous)
+    for key in coeffs.keys():
+        assert again[key].tobytes() == coeffs[key].tobytes()
+    assert np.shares_memory(again[0, 1], previous[0, 1]) and np.shares_memory(
+        again.highpass, previous.highpass
+    )
+
+
 def test_steerable_pyramid_bands_are_oriented():
     n = 64
     yy, xx = np.mgrid[:n, :n]

@@ -136,13 +136,28 @@ class HeegerBergen(TextureSynthesizer):
         )
 
     def _step(self, pyramid: SteerablePyramid, match_pixels: HistogramMatcher, match_band: dict):
-        """One iteration of the paper's loop: analyse, match every subband, reconstruct, match pixels."""
+        """One iteration of the paper's loop: analyse, match every subband, reconstruct, match pixels.
+
+        The subbands and the reconstruction are arrays of the step: they are matched in place,
+        with one scratch array for the sort keys of every call, and the next step's analysis
+        writes its subbands into this step's (issue 20; the same bytes,
+        ``docs/methods/heeger_bergen.md``, "Performance").
+        """
+        channels = self.model_.channels
+        scratch = np.empty(channels * pyramid.shape[0] * pyramid.shape[1], dtype=np.uint64)
+
+        def keys(values: int) -> np.ndarray:
+            return scratch[: channels * values].reshape(channels, values)
+
+        previous: list = [None]  # the last step's coefficients, whose arrays the next one reuses
 
         def step(image: np.ndarray, iteration: int) -> np.ndarray:
-            coeffs = pyramid.forward(image)
+            coeffs = pyramid.forward(image, out=previous[0])
             for key, band in coeffs.items():
-                coeffs[key] = match_band[key](band)
-            return match_pixels(pyramid.inverse(coeffs))
+                coeffs[key] = match_band[key](band, overwrite=True, keys=keys(band.shape[0] * band.shape[1]))
+            image = pyramid.inverse(coeffs)
+            previous[0] = coeffs
+            return match_pixels(image, overwrite=True, keys=keys(image.shape[0] * image.shape[1]))
 
         return step
 

@@ -207,10 +207,6 @@ class SteerablePyramid:
         hi = np.sqrt(np.maximum(1.0 - lo**2, 0.0))
         return lo, list(oriented_windows(theta, hi, self.n_orientations))
 
-    @staticmethod
-    def _bcast(filt: np.ndarray, ndim: int) -> np.ndarray:
-        return filt[..., None] if ndim == 3 else filt
-
     def band_shape(self, key) -> tuple[int, int]:
         """Size ``(h, w)`` of the coefficient at address ``key`` of a :class:`Pyramid`.
 
@@ -232,49 +228,107 @@ class SteerablePyramid:
             raise ValueError(f"image shape {img.shape[:2]} does not match the pyramid's {self.shape}")
         return img
 
-    def forward(self, image: np.ndarray) -> Pyramid:
-        """Analyse an image into a :class:`Pyramid`."""
+    def forward(self, image: np.ndarray, *, out: Pyramid | None = None) -> Pyramid:
+        """Analyse an image into a :class:`Pyramid`.
+
+        ``out``, a :class:`Pyramid` that ``forward`` gave earlier for an image of the same
+        shape and that is no longer needed, receives the coefficients in its arrays (an
+        iterative method reuses them instead of faulting in fresh pages: arrays of 32 MiB and
+        more are mapped afresh at every allocation; issue 20). Same bytes either way.
+
+        The channels of an ``(H, W, C)`` image are transformed as contiguous ``(C, H, W)``
+        planes (the coefficients are ``(h, w, C)`` views of such planes): the transforms
+        along the columns then read contiguous lines instead of lines strided by ``C``
+        values, which at 2048x2048 missed the caches and grew faster than the pixel count
+        (issue 20). Each line's transform is the same, so the bytes are too.
+        """
         img = self._check(image)
+        planes = np.ascontiguousarray(np.moveaxis(img, -1, 0)) if img.ndim == 3 else img
+        spec = np.fft.rfft2(planes)
+        product = spec * self._hi0  # one buffer for a level's filtered spectra (fewer fresh pages)
+        half = np.empty_like(product)  # and one for their column transforms
         nd = img.ndim
-        spec = np.fft.rfft2(img, axes=(0, 1))
-        highpass = np.fft.irfft2(spec * self._bcast(self._hi0, nd), s=self.shape, axes=(0, 1))
-        low = spec * self._bcast(self._lo0, nd)
+        highpass = _irfft2(product, self.shape, half, None if out is None else out.highpass, nd)
+        low = np.multiply(spec, self._lo0, out=spec)
         bands = []
         for level in range(self.n_scales):
             size = self.sizes[level]
             lo, oriented = self._filters[level]
-            bands.append([np.fft.irfft2(low * self._bcast(g, nd), s=size, axes=(0, 1)) for g in oriented])
-            low = self._down(low * self._bcast(lo, nd), size, self.sizes[level + 1])
-        lowpass = np.fft.irfft2(low, s=self.sizes[-1], axes=(0, 1))
-        return Pyramid(highpass=highpass, bands=bands, lowpass=lowpass)
+            if level:
+                product, half = np.empty_like(low), np.empty_like(low)
+            previous = [None] * len(oriented) if out is None else out.bands[level]
+            bands.append(
+                [
+                    _irfft2(np.multiply(low, g, out=product), size, half, reuse, nd)
+                    for g, reuse in zip(oriented, previous)
+                ]
+            )
+            low = self._down(np.multiply(low, lo, out=low), size, self.sizes[level + 1])
+        lowpass = np.fft.irfft2(low, s=self.sizes[-1])
+        return Pyramid(highpass=highpass, bands=bands, lowpass=_channels_last(lowpass, nd))
 
     def inverse(self, pyramid: Pyramid) -> np.ndarray:
-        """Synthesise the image from its coefficients (adjoint of :meth:`forward`)."""
+        """Synthesise the image from its coefficients (adjoint of :meth:`forward`; channels as
+        ``(C, H, W)`` planes, as there)."""
         if pyramid.lowpass is None:
             raise ValueError("the pyramid has no low-pass residual")
-        nd = pyramid.lowpass.ndim
-        low = np.fft.rfft2(pyramid.lowpass, axes=(0, 1))
+        nd = np.ndim(pyramid.lowpass)
+        low = np.fft.rfft2(_channels_first(pyramid.lowpass, nd))
         for level in reversed(range(self.n_scales)):
             size = self.sizes[level]
             lo, oriented = self._filters[level]
-            low = self._up(low, self.sizes[level + 1], size) * self._bcast(lo, nd)
+            low = self._up(low, self.sizes[level + 1], size)
+            low *= lo
+            conjugate = np.empty_like(oriented[0])
+            rows, spectrum = np.empty_like(low), np.empty_like(low)  # the bands' transforms
             for g, band in zip(oriented, pyramid.bands[level]):
-                low += np.fft.rfft2(band, axes=(0, 1)) * self._bcast(np.conj(g), nd)
-        spec = low * self._bcast(self._lo0, nd)
-        spec += np.fft.rfft2(pyramid.highpass, axes=(0, 1)) * self._bcast(self._hi0, nd)
-        return np.fft.irfft2(spec, s=self.shape, axes=(0, 1))
+                _rfft2(_channels_first(band, nd), rows, spectrum)
+                low += np.multiply(spectrum, np.conjugate(g, out=conjugate), out=spectrum)
+        spec = np.multiply(low, self._lo0, out=low)
+        spectrum = _rfft2(_channels_first(pyramid.highpass, nd), rows, spectrum)
+        spec += np.multiply(spectrum, self._hi0, out=spectrum)
+        return _channels_last(np.fft.irfft2(spec, s=self.shape), nd)
 
     @staticmethod
     def _down(spec: np.ndarray, fine: tuple[int, int], coarse: tuple[int, int]) -> np.ndarray:
         rows = crop_indices(fine[0], coarse[0])
         cols = np.arange(coarse[1] // 2 + 1)
         scale = (coarse[0] * coarse[1]) / (fine[0] * fine[1])
-        return spec[rows][:, cols] * scale
+        return spec[..., rows, :][..., cols] * scale
 
     @staticmethod
     def _up(spec: np.ndarray, coarse: tuple[int, int], fine: tuple[int, int]) -> np.ndarray:
         rows = crop_indices(fine[0], coarse[0])
-        out = np.zeros((fine[0], fine[1] // 2 + 1) + spec.shape[2:], dtype=complex)
+        out = np.zeros(spec.shape[:-2] + (fine[0], fine[1] // 2 + 1), dtype=complex)
         scale = (fine[0] * fine[1]) / (coarse[0] * coarse[1])
-        out[rows, : coarse[1] // 2 + 1] = spec * scale
+        out[..., rows, : coarse[1] // 2 + 1] = spec * scale
         return out
+
+
+def _rfft2(x: np.ndarray, rows: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """``numpy.fft.rfft2(x)`` in ``out`` (its two passes, as ``rfft2`` makes them: the rows'
+    real transforms, in ``rows``, then the columns')."""
+    np.fft.rfft(x, axis=-1, out=rows)
+    return np.fft.fft(rows, axis=-2, out=out)
+
+
+def _irfft2(
+    spectrum: np.ndarray, size: tuple[int, int], half: np.ndarray, reuse: np.ndarray | None, ndim: int
+) -> np.ndarray:
+    """``numpy.fft.irfft2(spectrum, s=size)`` as an ``(h, w, C)`` view of ``(C, h, w)`` planes:
+    its two passes, as ``irfft2`` makes them (the columns' transforms, in ``half``, then the
+    rows' real ones), the result written into ``reuse`` (such a view) when given."""
+    np.fft.ifft(spectrum, n=size[0], axis=-2, out=half)
+    planes = None if reuse is None else _channels_first(reuse, ndim)
+    return _channels_last(np.fft.irfft(half, n=size[1], axis=-1, out=planes), ndim)
+
+
+def _channels_last(planes: np.ndarray, ndim: int) -> np.ndarray:
+    """``(C, H, W)`` planes as an ``(H, W, C)`` view (a 2-D array as it is)."""
+    return np.moveaxis(planes, 0, -1) if ndim == 3 else planes
+
+
+def _channels_first(image: np.ndarray, ndim: int) -> np.ndarray:
+    """An ``(H, W, C)`` array as ``(C, H, W)`` planes (a view: contiguous when the array is a
+    view of such planes, as :meth:`SteerablePyramid.forward` gives them)."""
+    return np.moveaxis(np.asarray(image), -1, 0) if ndim == 3 else np.asarray(image)
