@@ -266,7 +266,7 @@ def test_pure_synthesis_copies_coherent_regions_and_reports_every_level(brick):
     assert levels == [(2, 2), (4, 4), (8, 8), (16, 16), (32, 32), (64, 64)]
     # (output pixels are the exemplar pixels the source map names by construction: E(T))
     # the coordinate map is locally a translation: neighbour pairs copied together, seeds 0-5:
-    # 0.58 .. 0.63; shuffled 0.001; random predictions 0.001
+    # 0.64 .. 0.70 (0.58 .. 0.63 with the exemplar mirrored); shuffled 0.001; random predictions 0.001
     assert coherent_fraction(result.source_map) >= 0.4
 
 
@@ -285,6 +285,21 @@ def test_sizes_other_than_powers_of_two_are_crops_of_the_next_one(brick):
     big = method.sample_with_map((64, 64), rng=5)
     small = method.sample_with_map((40, 57), rng=5)
     np.testing.assert_array_equal(small.source_map, big.source_map[:40, :57])
+
+
+def test_synthesis_wraps_the_exemplar_and_modification_mirrors_one_that_does_not_tile(brick):
+    """'auto': the paper's cyclic patches for a synthesis (docs/methods/patch_wavelet.md,
+    "Deviations"), the mirror for a modification with an exemplar that does not tile."""
+    assert wrap_seam_ratio(brick) > 1.5
+    method = texsyn.make_method("patch_wavelet").fit(brick)
+    assert method.transform_.exemplar_boundary == "periodic"
+    mirrored = texsyn.make_method("patch_wavelet", exemplar_boundary="symmetric").fit(brick)
+    assert not np.array_equal(method.sample((64, 64), rng=0), mirrored.sample((64, 64), rng=0))
+    texture = texsyn.data.exemplar("gravel", size=32)
+    np.testing.assert_array_equal(
+        method.modify(texture, 0.5, equalize=False).source_map,
+        mirrored.modify(texture, 0.5, equalize=False).source_map,
+    )
 
 
 def test_sigma_profile_adds_details_at_the_chosen_levels(brick):

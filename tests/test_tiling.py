@@ -33,10 +33,6 @@ SEAM_LIMIT = 1.1
 #: mean-|gradient| sharpness ratio is 1.5 on brick at any size, tileable or not, by its model.
 #: Its sharpness is checked as gradient energy (docs/tiling.md, "How it is tested").
 GAUSSIAN_GRADIENTS = {"random_phase"}
-#: outputs blurrier than a structured exemplar at 256x256, tileable or not; strict xfails
-SHARPNESS_XFAIL_256 = {
-    "patch_wavelet": "the patch-valued wavelet inverse averages overlapping patches: 0.79 at 256 (issue 23)",
-}
 #: a line across the band's edge may be at most 10 % spikier (its mean |gradient| over its
 #: six neighbours') than the 90th percentile of the output's other lines: a straight join of
 #: the band to the method's pixels measured 1.6-5.2x its neighbours on brick, where an
@@ -190,13 +186,6 @@ def test_every_method_tiles_without_a_seam_and_keeps_its_sharpness(name, brick):
     check_method_tiles(name, brick, 128, seeds=(0,))
 
 
-def with_xfails(reasons: dict[str, str]) -> list:
-    return [
-        pytest.param(n, marks=pytest.mark.xfail(strict=True, reason=reasons[n])) if n in reasons else n
-        for n in sorted(texsyn.METHODS)
-    ]
-
-
 def test_random_phase_keeps_the_gradient_energy_with_gaussian_gradients(brick):
     """Why random phase noise is held to gradient energy only: its output has the exemplar's
     gradient energy, and the mean |gradient| of a Gaussian field, sqrt(pi)/2 of its RMS (a
@@ -216,7 +205,7 @@ def test_every_method_tiles_at_256_on_two_seeds(name, brick):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", with_xfails(SHARPNESS_XFAIL_256))
+@pytest.mark.parametrize("name", sorted(texsyn.METHODS))
 def test_sharpness_of_a_tileable_256_output_is_the_exemplars(name, brick):
     model = texsyn.make_method(name, **FAST.get(name, {})).fit(brick)
     for seed in (0, 1):

@@ -40,6 +40,7 @@ from ..ops import as_channels, match_histogram
 from ..ops.canvas import crop_to_output, extend_to_canvas, power_of_two_canvas
 from ..ops.color import colour_space
 from ..ops.linalg import fixed_order
+from ..ops.patches import wrap_seam_ratio
 from ..ops.progress import Reporter
 from ..ops.search import bounded_index_bytes
 from ..transforms.patch_wavelet import (
@@ -118,8 +119,12 @@ class PatchWavelet(TextureSynthesizer):
         LLE runs on at most this many landmark patches; the others are placed by barycentric
         weights.
     exemplar_boundary : str
-        Extension of the exemplar past its border: 'auto' (periodic if it tiles, else
-        symmetric), 'periodic' or 'symmetric'.
+        Extension of the exemplar past its border: 'auto', 'periodic' or 'symmetric'.
+        'auto' is periodic for a synthesis, the paper's cyclic patch manifold (sections 2
+        and 4): a synthesis continues exemplar features across its border instead of
+        breaking them there, which keeps it as sharp as the exemplar at any output size
+        (``docs/methods/patch_wavelet.md``, "Deviations"); :meth:`modify` keeps the
+        periodic extension for an exemplar that tiles and the symmetric one otherwise.
     candidates : int
         Candidates of the float32 patch search re-ranked exactly.
     fit_rng : int
@@ -166,7 +171,9 @@ class PatchWavelet(TextureSynthesizer):
         side = max(4, 2 * self.min_width, self.feature_width)
         return side, f"patches of min_width={self.min_width} need at least {side}x{side} pixels"
 
-    def _make_transform(self, exemplar: np.ndarray, **built) -> PatchWaveletTransform:
+    def _make_transform(
+        self, exemplar: np.ndarray, *, exemplar_boundary: str | None = None, **built
+    ) -> PatchWaveletTransform:
         return PatchWaveletTransform(
             exemplar,
             min_width=self.min_width,
@@ -175,7 +182,7 @@ class PatchWavelet(TextureSynthesizer):
             embedding_dim=self.embedding_dim,
             lle_neighbors=self.lle_neighbors,
             lle_points=self.lle_points,
-            exemplar_boundary=self.exemplar_boundary,
+            exemplar_boundary=exemplar_boundary or self.exemplar_boundary,
             candidates=self.candidates,
             rng=self.fit_rng,
             **built,
@@ -185,7 +192,14 @@ class PatchWavelet(TextureSynthesizer):
         # the nearest-patch indexes of every width, and the LLE embeddings of the levels that
         # draw random details (none for a pure synthesis): everything sample uses, whatever the
         # output size (memory was checked by fit, from memory_terms, before this point)
-        self.transform_ = self._make_transform(exemplar, embedding_widths=self._noisy_widths(exemplar.shape))
+        # 'auto' is the paper's cyclic patch manifold for a synthesis (sections 2 and 4): a mirror
+        # would end every run of coherent exemplar features at the exemplar's border and make
+        # the synthesis a finer mosaic of smoother joints (docs/methods/patch_wavelet.md)
+        self.transform_ = self._make_transform(
+            exemplar,
+            exemplar_boundary="periodic" if self.exemplar_boundary == "auto" else self.exemplar_boundary,
+            embedding_widths=self._noisy_widths(exemplar.shape),
+        )
 
     def _level_width(self, exemplar_shape, level: int) -> int:
         """Window width of transform level ``level`` (1 the finest) for an exemplar of that shape."""
@@ -348,6 +362,9 @@ class PatchWavelet(TextureSynthesizer):
             raise InputError(f"grid_boundary must be 'symmetric' or 'periodic', got {grid_boundary!r}")
         if thresholding not in ("local", "coefficient"):
             raise InputError(f"thresholding must be 'local' or 'coefficient', got {thresholding!r}")
+        # the fitted transform wraps the exemplar (synthesis); a modification mirrors one that
+        # does not tile, with transforms of its own (the equalised exemplar's, or this one)
+        mirrored = self.exemplar_boundary == "auto" and wrap_seam_ratio(exemplar) > 1.5
         size = np.shape(texture) if not isinstance(texture, (str, bytes)) else ()
         if len(size) in (2, 3) and min(size[:2]) >= 1:  # before the texture is even converted
             (h, w), (n_h, n_w) = size[:2], self.modify_grid(size[:2])
@@ -355,7 +372,7 @@ class PatchWavelet(TextureSynthesizer):
                 exemplar.shape,
                 task=f"modifying a {w}x{h} texture ({n_w}x{n_h} grid) with a {exemplar.shape[1]}x{exemplar.shape[0]} exemplar",
                 advice="use a smaller texture or exemplar",
-                terms=self._modify_terms(exemplar.shape, size, bool(equalize), len(ratios)),
+                terms=self._modify_terms(exemplar.shape, size, bool(equalize) or mirrored, len(ratios)),
             )
         tex = as_channels(np.asarray(as_exemplar(texture, name="texture"), dtype=np.float64))
         ex = as_channels(exemplar)
@@ -364,12 +381,11 @@ class PatchWavelet(TextureSynthesizer):
         n_h, n_w = self.modify_grid((h, w))
         padded = extend_to_canvas(tex, (n_h, n_w), mode="symmetric")
         used = sorted(self._level_widths(ex.shape, int(math.log2(min(n_h, n_w)))))
-        if equalize:
-            equalized = np.stack(
-                [match_histogram(ex[..., c], tex[..., c]) for c in range(ex.shape[2])], axis=-1
-            )
+        if equalize or mirrored:
+            if equalize:
+                ex = np.stack([match_histogram(ex[..., c], tex[..., c]) for c in range(ex.shape[2])], axis=-1)
             feature = min(self.feature_width, largest_width(ex.shape))
-            transform = self._make_transform(equalized, widths=used + [feature], embedding_widths=used)
+            transform = self._make_transform(ex, widths=used + [feature], embedding_widths=used)
         else:  # the fitted transform, with this call's embeddings (self.transform_ is unchanged)
             transform = self.transform_.prepare(used)
 
@@ -550,7 +566,9 @@ class PatchWavelet(TextureSynthesizer):
         exemplar_shape, texture_shape : tuple
             ``(H, W)`` or ``(H, W, C)``.
         equalize : bool
-            Whether the exemplar is equalised first (a second set of indexes is built).
+            Whether the exemplar is equalised first (a second set of indexes is built; also
+            true of an exemplar that does not tile with ``exemplar_boundary='auto'``, which a
+            modification mirrors while the fitted transform wraps it).
         n_ratios : int
             Number of thresholds (results kept at once).
 
