@@ -570,10 +570,11 @@ def join_bands(height: int, width: int, radius: int) -> tuple[np.ndarray, np.nda
     The seed sits across the output's corner (:func:`grow_pixels` ``torus``), so the fronts
     meet last along the middle row and the middle column. The bands are the ``2 radius + 1``
     rows centred on the middle row, then the ``2 radius + 1`` columns centred on the middle
-    column (the square where they cross is in both), each swept along wavefronts
-    ``j + (radius + 1) k`` (``j`` along the band, ``k`` across it): the pixels of one
-    wavefront are more than ``radius`` apart along the band, so none is in another's window
-    (``docs/tiling.md``, "On a torus (``efros_leung``)").
+    column (the square where they cross is in both). Each is cut along its length into
+    segments of at least ``(radius + 1)(2 radius + 1)`` pixels, swept side by side along
+    wavefronts ``j + (radius + 1) k`` (``j`` along the segment, ``k`` across the band): the
+    pixels of one wavefront are more than ``radius`` apart along the band, so none is in
+    another's window (``docs/tiling.md``, "On a torus (``efros_leung``)").
 
     Returns
     -------
@@ -587,13 +588,17 @@ def join_bands(height: int, width: int, radius: int) -> tuple[np.ndarray, np.nda
     >>> rows, cols, fronts = join_bands(8, 6, 1)
     >>> [list(zip(rows[a:b].tolist(), cols[a:b].tolist())) for a, b in zip(fronts[:4], fronts[1:5])]
     [[(3, 0)], [(3, 1)], [(3, 2), (4, 0)], [(3, 3), (4, 1)]]
+    >>> rows, cols, fronts = join_bands(6, 12, 1)  # two segments of the rows' band
+    >>> list(zip(rows[:4].tolist(), cols[:4].tolist()))
+    [(2, 0), (2, 6), (2, 1), (2, 7)]
     """
     side, slope = 2 * int(radius) + 1, int(radius) + 1
-    across = np.arange(side)
     rows, cols, fronts = [], [], [0]
     for length, circumference, down in ((width, height, False), (height, width, True)):
-        k, j = np.meshgrid(across, np.arange(length), indexing="ij")
-        wave = (j + slope * k).ravel()
+        k, j = np.meshgrid(np.arange(side), np.arange(length), indexing="ij")
+        n_segments = max(1, length // (slope * side))
+        starts = (np.arange(n_segments) * length) // n_segments
+        wave = (j - starts[np.searchsorted(starts, j, "right") - 1] + slope * k).ravel()
         order = np.argsort(wave, kind="stable")
         band = (k.ravel()[order] + circumference // 2 - int(radius)) % circumference
         along = j.ravel()[order]
@@ -619,8 +624,8 @@ def _resample_joins(
     Pixel after pixel in sweep order, each is forgotten and takes the centre of an exemplar
     window within ``(1 + tolerance)`` of the best distance to its whole window (every pixel
     but itself; the approximate search's candidates continue its 8 neighbours' sources),
-    always accepted: the non-causal second pass of pixel-based synthesis (Wei and Levoy 2000,
-    section 2.3), on the lines where the growth filled a gap from both sides
+    always accepted: a non-causal second pass of pixel-based synthesis (as Wei–Levoy's
+    across its wraps), on the lines where the growth filled a gap from both sides
     (``docs/tiling.md``, "On a torus (``efros_leung``)"). A wavefront is searched at once
     (split by :func:`~texsyn.ops.nonparametric.schedule_batches` on the torus where a small
     output brings two of its pixels within a window): exactly the one-by-one order. One
