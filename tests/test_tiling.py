@@ -372,7 +372,7 @@ def check_torus_tiles(model, exemplar: np.ndarray, size: int, seeds, sharpness_t
         assert strength <= SEAM_LIMIT, f"seed {seed}: seams {strength:.2f} x the interior's 90th percentile"
         # the fronts' join, before it was sampled again: 1.3-4.7x its neighbours on brick,
         # above the output's spikiest other line on 8 of 16 outputs (exact and approximate
-        # search, 128 and 256, seeds 0-3); sampled again, 0.99-1.65x, below it on all 16
+        # search, 128 and 256, seeds 0-3); sampled again, 0.99-1.66x, below it on all 16
         # (docs/tiling.md, "On a torus (efros_leung)")
         middle, farthest = middle_line_spikes(result.image)
         assert middle <= farthest, (
