@@ -464,13 +464,31 @@ def wrap_coherence(source_map: np.ndarray) -> tuple[float, float]:
     return float(across), float(inside)
 
 
+def middle_line_spikes(image: np.ndarray) -> tuple[float, float]:
+    """The spikiest of the three lines around the middle row and column, where the growing
+    fronts of a torus growth meet (half a tile from the seed at the corner), and the spikiest
+    line farther than 8 pixels from them: :func:`line_spikes` of the output rolled by half."""
+    h, w = image.shape[:2]
+    offsets, spikes = line_spikes(np.roll(image, (h // 2, w // 2), axis=(0, 1)))
+    return float(spikes[np.abs(offsets) <= 1].max()), float(spikes[np.abs(offsets) > 8].max())
+
+
 def check_torus_tiles(model, exemplar: np.ndarray, size: int, seeds, sharpness_too: bool = True) -> None:
-    """A torus output: seams, the exact source map, its copied runs across the wraps, sharpness."""
+    """A torus output: seams, where the fronts meet, the exact source map, its copied runs
+    across the wraps, sharpness."""
     assert model.tiling_for((size, size)) == "torus"
     for seed in seeds:
         result = model.sample_with_map((size, size), rng=seed, tileable=True)
         strength = seam_strength(result.image)
         assert strength <= SEAM_LIMIT, f"seed {seed}: seams {strength:.2f} x the interior's 90th percentile"
+        # the fronts' join, before it was sampled again: 1.3-4.7x its neighbours on brick,
+        # above the output's spikiest other line on 8 of 16 outputs (exact and approximate
+        # search, 128 and 256, seeds 0-3); sampled again, 0.99-1.66x, below it on all 16
+        # (docs/tiling.md, "On a torus (efros_leung)")
+        middle, farthest = middle_line_spikes(result.image)
+        assert middle <= farthest, (
+            f"seed {seed}: where the fronts meet {middle:.2f}x, elsewhere {farthest:.2f}x"
+        )
         rows, cols = result.source_map[..., 0], result.source_map[..., 1]
         np.testing.assert_array_equal(result.image, exemplar[rows, cols])
         across, inside = wrap_coherence(result.source_map)
@@ -486,9 +504,8 @@ def test_efros_leung_grows_on_a_torus(search, brick):
     assert model.tiling_for((128, 128)) == model.tiling_for((256, 256)) == "torus"
     assert model.tiling_for((128, 10)) == "seam band"  # narrower than a window
     assert texsyn.make_method("cwt").fit(brick).tiling_for((128, 128)) == "seam band"
-    if search == "exact":  # the approximate search is the parametrised test's above
-        check_torus_tiles(model, brick, 128, seeds=(0,))
-    else:  # what a plain output has across its edges
+    check_torus_tiles(model, brick, 128, seeds=(0,))
+    if search == "approximate":  # what a plain output has across its edges
         assert wrap_coherence(model.sample_with_map((128, 128), rng=0).source_map)[0] < 0.05
 
 
@@ -528,10 +545,11 @@ def test_efros_leung_with_the_wrap_ignored_fails_the_seam_check(search, brick, m
 @pytest.mark.slow
 @pytest.mark.parametrize("search", ["exact", "approximate"])
 def test_efros_leung_tiles_on_a_torus_at_256_on_two_seeds(search, brick):
+    """The issue's figures on two seeds, where the fronts meet too; the join once added
+    gradient (exact search, seed 1: sharpness 1.21, its middle lines 1.56x where the
+    output's spikiest other line is 1.46x)."""
     model = texsyn.make_method("efros_leung", search=search).fit(brick)
-    check_torus_tiles(model, brick, 256, seeds=(0, 1), sharpness_too=False)
-    sharpness = sharpness_ratio(model.sample((256, 256), rng=0, tileable=True), brick)
-    assert 0.8 <= sharpness <= 1.2, f"sharpness ratio {sharpness:.2f}"
+    check_torus_tiles(model, brick, 256, seeds=(0, 1))
 
 
 # ------------------------------------------------------------------ Wei-Levoy on a torus

@@ -54,6 +54,7 @@ __all__ = [
     "fill_block_rows",
     "fill_blocks",
     "grow_pixels",
+    "join_bands",
     "raster_positions",
     "torus_fits",
     "torus_positions",
@@ -482,8 +483,11 @@ def grow_pixels(
         Grow the output on a torus, so that it tiles (``docs/tiling.md``, "On a torus"):
         every window wraps around the output's edges (its values and known pixels across an
         edge are those of the other side), a pixel's 8-neighbours and the pixels that
-        interact in a batch wrap too, so the filled region grows across the wraps. The
-        output must be at least ``window // 2`` a side; not with ``known`` or ``guide``.
+        interact in a batch wrap too, so the filled region grows across the wraps. Then the
+        bands where the growing fronts met (the middle row and column) are sampled again
+        with every pixel around them known, in two sweeps (:func:`join_bands`; one draw
+        per pixel of each sweep, after the growth's). The output must be at least
+        ``window // 2`` a side; not with ``known`` or ``guide``.
 
     Returns
     -------
@@ -560,7 +564,99 @@ def grow_pixels(
                 threshold *= 1.1
             if reporter is not None:
                 reporter(n_filled, total)
+        if torus:
+            for sweep in range(JOIN_SWEEPS):
+                _resample_joins(fill, canvas, rng, tolerance, max_batch, backward=sweep % 2 == 1)
     return values[r : r + height, r : r + width], source
+
+
+#: sweeps of :func:`_resample_joins` over the bands where the fronts of a torus growth meet,
+#: forwards then backwards, so that the join is sampled again from each side (one sweep left
+#: the approximate search's middle lines up to 2.3x their neighbours, two 1.1-1.7x;
+#: ``docs/tiling.md``, "On a torus (``efros_leung``)")
+JOIN_SWEEPS = 2
+
+
+def join_bands(height: int, width: int, radius: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The pixels around the lines where the fronts of a torus growth meet, in sweep order.
+
+    The seed sits across the output's corner (:func:`grow_pixels` ``torus``), so the fronts
+    meet last along the middle row and the middle column. The bands are the ``2 radius + 1``
+    rows centred on the middle row, then the ``2 radius + 1`` columns centred on the middle
+    column (the square where they cross is in both). Each is cut along its length into
+    segments of at least ``(radius + 1)(2 radius + 1)`` pixels, swept side by side along
+    wavefronts ``j + (radius + 1) k`` (``j`` along the segment, ``k`` across the band): the
+    pixels of one wavefront are more than ``radius`` apart along the band, so none is in
+    another's window (``docs/tiling.md``, "On a torus (``efros_leung``)").
+
+    Returns
+    -------
+    rows, cols : ndarray of int64
+        The pixels, wavefront after wavefront.
+    fronts : ndarray of int64
+        Wavefront ``f`` is pixels ``fronts[f]:fronts[f + 1]``.
+
+    Examples
+    --------
+    >>> rows, cols, fronts = join_bands(8, 6, 1)
+    >>> [list(zip(rows[a:b].tolist(), cols[a:b].tolist())) for a, b in zip(fronts[:4], fronts[1:5])]
+    [[(3, 0)], [(3, 1)], [(3, 2), (4, 0)], [(3, 3), (4, 1)]]
+    >>> rows, cols, fronts = join_bands(6, 12, 1)  # two segments of the rows' band
+    >>> list(zip(rows[:4].tolist(), cols[:4].tolist()))
+    [(2, 0), (2, 6), (2, 1), (2, 7)]
+    """
+    side, slope = 2 * int(radius) + 1, int(radius) + 1
+    rows, cols, fronts = [], [], [0]
+    for length, circumference, down in ((width, height, False), (height, width, True)):
+        k, j = np.meshgrid(np.arange(side), np.arange(length), indexing="ij")
+        n_segments = max(1, length // (slope * side))
+        starts = (np.arange(n_segments) * length) // n_segments
+        wave = (j - starts[np.searchsorted(starts, j, "right") - 1] + slope * k).ravel()
+        order = np.argsort(wave, kind="stable")
+        band = (k.ravel()[order] + circumference // 2 - int(radius)) % circumference
+        along = j.ravel()[order]
+        rows.append(along if down else band)
+        cols.append(band if down else along)
+        starts = np.flatnonzero(np.diff(wave[order])) + 1
+        fronts.extend((starts + fronts[-1]).tolist() + [fronts[-1] + wave.size])
+    return np.concatenate(rows), np.concatenate(cols), np.asarray(fronts, dtype=np.int64)
+
+
+def _resample_joins(
+    fill,
+    canvas: _Canvas,
+    rng: np.random.Generator,
+    tolerance: float,
+    max_batch: int,
+    *,
+    backward: bool = False,
+) -> None:
+    """Sample again, by the growth's own rule, every pixel of the bands where the fronts of a
+    torus growth met (:func:`join_bands`), now that every pixel around them is known.
+
+    Pixel after pixel in sweep order, each is forgotten and takes the centre of an exemplar
+    window within ``(1 + tolerance)`` of the best distance to its whole window (every pixel
+    but itself; the approximate search's candidates continue its 8 neighbours' sources),
+    always accepted: a non-causal second pass of pixel-based synthesis (as Wei–Levoy's
+    across its wraps), on the lines where the growth filled a gap from both sides
+    (``docs/tiling.md``, "On a torus (``efros_leung``)"). A wavefront is searched at once
+    (split by :func:`~texsyn.ops.nonparametric.schedule_batches` on the torus where a small
+    output brings two of its pixels within a window): exactly the one-by-one order. One
+    uniform draw per pixel, in :func:`join_bands`'s order; ``backward`` visits the
+    wavefronts last to first.
+    """
+    r = canvas.r
+    height, width = canvas.source.shape[:2]
+    rows, cols, fronts = join_bands(height, width, r)
+    uniforms = rng.random(rows.size)
+    spans = list(zip(fronts[:-1].tolist(), fronts[1:].tolist(), strict=True))
+    for start, stop in reversed(spans) if backward else spans:
+        front_rows, front_cols, front_uniforms = rows[start:stop], cols[start:stop], uniforms[start:stop]
+        batch_of, n_batches = schedule_batches(front_rows, front_cols, r, height, width, max_batch, True)
+        for batch in range(n_batches):
+            members = batch_of == batch
+            canvas.forget(front_rows[members], front_cols[members])
+            fill(front_rows[members], front_cols[members], front_uniforms[members], tolerance, np.inf)
 
 
 def _place_seed(canvas, ex, seed_size, seed_block, rng) -> int:
@@ -624,20 +720,33 @@ class _Canvas:
     def write(self, rows: np.ndarray, cols: np.ndarray, values: np.ndarray) -> None:
         """Output pixels ``(rows, cols)`` take ``values`` and become known (and, on a torus,
         their copies in the padding)."""
+        for at_rows, at_cols, inside in self._places(rows, cols):
+            self.values[at_rows, at_cols] = values[inside]
+            self.filled[at_rows, at_cols] = True
+
+    def forget(self, rows: np.ndarray, cols: np.ndarray) -> None:
+        """Output pixels ``(rows, cols)`` become unknown again (their copies too), to be
+        sampled again (:func:`_resample_joins`); values and sources stay until then."""
+        for at_rows, at_cols, _ in self._places(rows, cols):
+            self.filled[at_rows, at_cols] = False
+
+    def _places(self, rows: np.ndarray, cols: np.ndarray) -> Iterator[tuple[np.ndarray, np.ndarray, Any]]:
+        """Where output pixels ``(rows, cols)`` stand in the padded canvas: themselves, and on a
+        torus their copies across the wraps (which of the pixels each copy is of)."""
         r = self.r
-        self.values[rows + r, cols + r] = values
-        self.filled[rows + r, cols + r] = True
+        yield rows + r, cols + r, slice(None)
         if not self.wrap:
             return
         height, width = self.source.shape[:2]
         for i in (-1, 0, 1):
             for j in (-1, 0, 1):
+                if i == j == 0:
+                    continue
                 at_rows, at_cols = rows + r + i * height, cols + r + j * width
                 inside = (
                     (at_rows >= 0) & (at_rows < height + 2 * r) & (at_cols >= 0) & (at_cols < width + 2 * r)
                 )
-                self.values[at_rows[inside], at_cols[inside]] = values[inside]
-                self.filled[at_rows[inside], at_cols[inside]] = True
+                yield at_rows[inside], at_cols[inside], inside
 
 
 class _ExactPass:
