@@ -146,7 +146,7 @@ class EfrosLeung(TextureSynthesizer):
         terms["output image"] = output_bytes(c, output_shape)
         return terms
 
-    def _sample(self, shape, rng, callback):
+    def _sample(self, shape, rng, callback, *, torus: bool = False):
         values, source = grow_pixels(
             self.sampler_,
             shape,
@@ -155,6 +155,7 @@ class EfrosLeung(TextureSynthesizer):
             seed_size=self.seed_size,
             rng=rng,
             reporter=Reporter(callback, "pixels"),
+            torus=torus,
         )
         return values, source
 
@@ -166,17 +167,7 @@ class EfrosLeung(TextureSynthesizer):
         """The growth of :meth:`_sample` on a torus: windows, neighbours and batches wrap
         around the output's edges, so the region grows across them and the output tiles
         (:func:`texsyn.drivers.raster.grow_pixels` ``torus``); exact and approximate search."""
-        values, source = grow_pixels(
-            self.sampler_,
-            shape,
-            tolerance=self.tolerance,
-            max_error=self.max_error,
-            seed_size=self.seed_size,
-            rng=rng,
-            reporter=Reporter(callback, "pixels"),
-            torus=True,
-        )
-        return values, source
+        return self._sample(shape, rng, callback, torus=True)
 
     @fixed_order
     def fill(
