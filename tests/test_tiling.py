@@ -584,3 +584,17 @@ def test_wei_levoy_with_the_wrap_ignored_fails_the_check(brick, monkeypatch):
 
     monkeypatch.setattr(wl, "gather_wrapped", clamped)
     assert not wei_levoy_wraps(texsyn.make_method("wei_levoy").fit(brick), seed=0)
+
+
+@pytest.mark.slow
+def test_wei_levoy_without_the_wrap_pass_fails_the_check(brick, monkeypatch):
+    """Sabotage: the raster pass on the torus only, no second pass across the wraps (the first
+    rows and columns keep what they drew against the initial noise): seams 1.20 on seed 0,
+    sources continuing each other across the wraps 0.10 against 0.50 inside."""
+    import texsyn.methods.wei_levoy as wl
+
+    monkeypatch.setattr(wl.WeiLevoy, "_wrap_pass", lambda self, *args: None)
+    model = texsyn.make_method("wei_levoy").fit(brick)
+    assert not wei_levoy_wraps(model, seed=0)
+    with pytest.raises(AssertionError, match="seams"):
+        check_method_tiles("wei_levoy", brick, 128, seeds=(0,), sharpness_too=False)

@@ -120,10 +120,11 @@ class PatchWavelet(TextureSynthesizer):
         weights.
     exemplar_boundary : str
         Extension of the exemplar past its border: 'auto', 'periodic' or 'symmetric'.
-        'auto' is periodic for a synthesis, the paper's cyclic patch manifold (sections 2
-        and 4): a synthesis continues exemplar features across its border instead of
-        breaking them there, which keeps it as sharp as the exemplar at any output size
-        (``docs/methods/patch_wavelet.md``, "Deviations"); :meth:`modify` keeps the
+        'auto' is periodic for a synthesis (a deviation: section 4 mirrors a non-periodic
+        exemplar): a synthesis continues exemplar features across its border instead of
+        breaking them there, which keeps it as sharp as the exemplar at any output size, at
+        the price of straight cuts where runs cross the wrap of an exemplar that does not
+        tile (``docs/methods/patch_wavelet.md``, "Deviations"); :meth:`modify` keeps the
         periodic extension for an exemplar that tiles and the symmetric one otherwise.
     candidates : int
         Candidates of the float32 patch search re-ranked exactly.
@@ -192,9 +193,10 @@ class PatchWavelet(TextureSynthesizer):
         # the nearest-patch indexes of every width, and the LLE embeddings of the levels that
         # draw random details (none for a pure synthesis): everything sample uses, whatever the
         # output size (memory was checked by fit, from memory_terms, before this point)
-        # 'auto' is the paper's cyclic patch manifold for a synthesis (sections 2 and 4): a mirror
-        # would end every run of coherent exemplar features at the exemplar's border and make
-        # the synthesis a finer mosaic of smoother joints (docs/methods/patch_wavelet.md)
+        # 'auto' extends the exemplar periodically for a synthesis (a deviation from section 4's
+        # mirror for non-periodic textures): a mirror would end every run of coherent exemplar
+        # features at the exemplar's border and make the synthesis a finer mosaic of smoother
+        # joints (docs/methods/patch_wavelet.md, "Deviations")
         self.transform_ = self._make_transform(
             exemplar,
             exemplar_boundary="periodic" if self.exemplar_boundary == "auto" else self.exemplar_boundary,

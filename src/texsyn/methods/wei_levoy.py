@@ -387,7 +387,12 @@ class WeiLevoy(TextureSynthesizer):
         on the torus. The rows go in raster order and the columns in column order, along
         wavefronts ``x + (r + 1) y`` (``y + (r + 1) x`` for the columns): two pixels of one
         wavefront are more than ``r`` apart in the other direction, so every pixel sees the
-        pixels revisited before it in that order, as a one-by-one pass would show it.
+        pixels revisited before it in that order, as a one-by-one pass would show it -- on a
+        level at least ``(r + 1)(2r - 1) + r + 1`` pixels along the band. On a narrower level
+        (the coarse levels: 16 pixels at 128x128 with the defaults) two pixels of one
+        wavefront can be within ``r`` of each other across the wrap along the band, and each
+        reads the other's value from before the wavefront (still the same bytes on any
+        thread count).
         """
         ex = self.pyramid_[level]
         flat_ex = ex.reshape(-1, ex.shape[2])
