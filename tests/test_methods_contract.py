@@ -75,7 +75,7 @@ def test_source_map_names_exemplar_pixels(method_name, colour_exemplar):
     assert src.shape == (33, 27, 2)
     assert src[..., 0].min() >= 0 and src[..., 0].max() < colour_exemplar.shape[0]
     assert src[..., 1].min() >= 0 and src[..., 1].max() < colour_exemplar.shape[1]
-    copied = colour_exemplar[src[..., 0], src[..., 1]]
+    copied = method.source_image[src[..., 0], src[..., 1]]
     if type(method).source_map_exact:
         np.testing.assert_array_equal(result.image, copied.astype(np.float32))
     else:  # coefficients were copied, pixels re-synthesised: close to the named pixels

@@ -105,7 +105,7 @@ class TextureSynthesizer:
     #: more for a method whose statistics treat any number of channels jointly, so that a
     #: material stack or an RGBA exemplar is synthesised as one image (``docs/materials.md``)
     max_channels: ClassVar[int] = 3
-    #: whether every output pixel equals the exemplar pixel its source map names
+    #: whether every output pixel equals the pixel its source map names in :attr:`source_image`
     source_map_exact: ClassVar[bool] = True
     #: rough working memory per pixel and channel, in bytes: the default of
     #: :meth:`memory_terms` for methods that do not model their memory in more detail
@@ -392,6 +392,12 @@ class TextureSynthesizer:
     def _fit(self, exemplar: np.ndarray) -> None:  # pragma: no cover - trivial default
         pass
 
+    @property
+    def source_image(self) -> np.ndarray:
+        """The image whose positions a source map names: the fitted exemplar, or the image a
+        method copies from in its place (``patch_wavelet``: the exemplar's periodic component)."""
+        return self._require_fitted()
+
     def _require_fitted(self) -> np.ndarray:
         ex = getattr(self, "exemplar_", None)
         if ex is None:
@@ -467,7 +473,7 @@ class TextureSynthesizer:
         if tiling == "seam band":  # methods._tiling
             from ._tiling import quilted_seam_band
 
-            image, source = quilted_seam_band(self._as_output(image), source, ex, generator)
+            image, source = quilted_seam_band(self._as_output(image), source, self.source_image, generator)
         result = self._as_output(image)
         if source is not None:
             source = np.asarray(source, dtype=np.int32)

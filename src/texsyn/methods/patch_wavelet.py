@@ -35,10 +35,11 @@ from .._validation import OneOf, Range, as_exemplar
 from ..drivers.coarse_to_fine import coarse_to_fine
 from ..errors import InputError
 from ..models.patch_search import FAST_SEARCH_DIMENSION, FAST_SEARCH_POSITIONS
-from ..models.patch_wavelet import PatchWaveletTransform
+from ..models.patch_wavelet import WRAP_SEAM_LIMIT, PatchWaveletTransform
 from ..ops import as_channels, match_histogram
 from ..ops.canvas import crop_to_output, extend_to_canvas, power_of_two_canvas
 from ..ops.color import colour_space
+from ..ops.fourier import periodic_smooth_decomposition
 from ..ops.linalg import fixed_order
 from ..ops.patches import wrap_seam_ratio
 from ..ops.progress import Reporter
@@ -140,7 +141,6 @@ class PatchWavelet(TextureSynthesizer):
     )
     deprecated_params = {"random_state": "fit_rng"}
     has_source_map = True
-    source_map_exact = True
 
     def __init__(
         self,
@@ -193,15 +193,28 @@ class PatchWavelet(TextureSynthesizer):
         # the nearest-patch indexes of every width, and the LLE embeddings of the levels that
         # draw random details (none for a pure synthesis): everything sample uses, whatever the
         # output size (memory was checked by fit, from memory_terms, before this point)
-        # 'auto' extends the exemplar periodically for a synthesis (a deviation from section 4's
-        # mirror for non-periodic textures): a mirror would end every run of coherent exemplar
-        # features at the exemplar's border and make the synthesis a finer mosaic of smoother
-        # joints (docs/methods/patch_wavelet.md, "Deviations")
+        # 'auto' synthesises on a periodic exemplar (a deviation from section 4's mirror for
+        # non-periodic textures): a mirror ends every run of coherent exemplar features at the
+        # exemplar's border and makes the synthesis a finer mosaic of smoother joints; an
+        # exemplar that does not tile is replaced by its periodic component (Moisan's
+        # periodic-plus-smooth decomposition), so that runs crossing its wrap copy no straight
+        # cut either (docs/methods/patch_wavelet.md, "Deviations")
+        boundary = self.exemplar_boundary
+        source = exemplar
+        if boundary == "auto":
+            boundary = "periodic"
+            if wrap_seam_ratio(as_channels(exemplar)) > WRAP_SEAM_LIMIT:
+                source = np.clip(periodic_smooth_decomposition(exemplar)[0], 0.0, 1.0)
         self.transform_ = self._make_transform(
-            exemplar,
-            exemplar_boundary="periodic" if self.exemplar_boundary == "auto" else self.exemplar_boundary,
-            embedding_widths=self._noisy_widths(exemplar.shape),
+            source, exemplar_boundary=boundary, embedding_widths=self._noisy_widths(exemplar.shape)
         )
+
+    @property
+    def source_image(self) -> np.ndarray:
+        """The image the synthesis copies from: the exemplar, or with ``exemplar_boundary='auto'``
+        its periodic component when it does not tile (``_fit``), in the exemplar's rank."""
+        image = self.transform_.windows.image
+        return image[..., 0] if self._require_fitted().ndim == 2 else image
 
     def _level_width(self, exemplar_shape, level: int) -> int:
         """Window width of transform level ``level`` (1 the finest) for an exemplar of that shape."""
@@ -366,7 +379,7 @@ class PatchWavelet(TextureSynthesizer):
             raise InputError(f"thresholding must be 'local' or 'coefficient', got {thresholding!r}")
         # the fitted transform wraps the exemplar (synthesis); a modification mirrors one that
         # does not tile, with transforms of its own (the equalised exemplar's, or this one)
-        mirrored = self.exemplar_boundary == "auto" and wrap_seam_ratio(exemplar) > 1.5
+        mirrored = self.exemplar_boundary == "auto" and wrap_seam_ratio(exemplar) > WRAP_SEAM_LIMIT
         size = np.shape(texture) if not isinstance(texture, (str, bytes)) else ()
         if len(size) in (2, 3) and min(size[:2]) >= 1:  # before the texture is even converted
             (h, w), (n_h, n_w) = size[:2], self.modify_grid(size[:2])

@@ -284,6 +284,11 @@ class ExemplarWindows(_Immutable):
         return glued.reshape(glued.shape[0], -1)
 
 
+#: an exemplar tiles when its wrap-around seam is at most this many times its interior's
+#: neighbour differences (:func:`~texsyn.ops.wrap_seam_ratio`)
+WRAP_SEAM_LIMIT = 1.5
+
+
 class PatchWaveletTransform(_Immutable, PatchLifting):
     """The patch-valued wavelet transform of one exemplar (Peyré 2007, section 4).
 
@@ -345,7 +350,7 @@ class PatchWaveletTransform(_Immutable, PatchLifting):
         ex = np.asarray(as_channels(np.asarray(exemplar)), dtype=np.float64)
         h, w = ex.shape[:2]
         if exemplar_boundary == "auto":
-            exemplar_boundary = "periodic" if wrap_seam_ratio(ex) <= 1.5 else "symmetric"
+            exemplar_boundary = "periodic" if wrap_seam_ratio(ex) <= WRAP_SEAM_LIMIT else "symmetric"
         largest = largest_width(ex.shape)
         self.max_width = largest if max_width is None else int(min(max_width, largest))
         if self.max_width < 2:
