@@ -8,6 +8,7 @@ with a correspondence term), and hole filling (``docs/editing.md``).
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from typing import Annotated
 
@@ -34,6 +35,17 @@ from ._base import SynthesisResult, TextureSynthesizer
 from ._memory import CALIBRATED_MARGIN, fft_search_terms, output_bytes, shape_dims
 
 __all__ = ["Quilting"]
+
+
+@functools.cache
+def block_offsets(size: int) -> np.ndarray:
+    """``(row, col)`` of every pixel of a ``size`` x ``size`` block, float64 (read-only, shared):
+    added to a block's exemplar corner, the exemplar positions the canvas carries."""
+    offsets = np.stack(np.meshgrid(np.arange(size), np.arange(size), indexing="ij"), axis=-1).astype(
+        np.float64
+    )
+    offsets.flags.writeable = False
+    return offsets
 
 
 class Quilting(TextureSynthesizer):
@@ -162,12 +174,23 @@ class Quilting(TextureSynthesizer):
         ti, tj = divmod(int(cand[rng.integers(cand.size)]), d.shape[1])
         return ti, tj
 
+    def _chooser(self, channels: int, rng: np.random.Generator) -> Callable[[Block], tuple[int, int]]:
+        """:meth:`_choose` for blocks of a canvas that carries the exemplar positions after its
+        ``channels`` colour channels, with one run's cache of the search's energy terms."""
+        energies: dict = {}
+
+        def choose(block: Block) -> tuple[int, int]:
+            return self._choose(
+                Block(block.row, block.col, block.values[..., :channels], block.known), rng, energies
+            )
+
+        return choose
+
     def _paste(
         self,
         block: Block,
         corner: tuple[int, int],
         exemplar: np.ndarray,
-        offsets: np.ndarray,
         every_side: bool = False,
     ) -> np.ndarray:
         """The block joined along the boundary cut (section 2.1, step 3).
@@ -177,7 +200,8 @@ class Quilting(TextureSynthesizer):
         ``every_side``: the cut also runs through known strips on the right and at the
         bottom (on a torus, :func:`texsyn.ops.seams.cut_mask`).
         """
-        b, c = offsets.shape[0], exemplar.shape[2]
+        b, c = block.values.shape[0], exemplar.shape[2]  # a transfer pass's blocks are smaller
+        offsets = block_offsets(b)
         ti, tj = corner
         old = block.values
         new = np.concatenate([exemplar[ti : ti + b, tj : tj + b], offsets + (ti, tj)], axis=-1)
@@ -191,14 +215,7 @@ class Quilting(TextureSynthesizer):
         ex = as_channels(self.exemplar_)
         c = ex.shape[2]
         b, o = self.patch_size, self._overlap()
-        energies: dict = {}  # this call's cache of the search's energy terms
-        offsets = np.stack(np.meshgrid(np.arange(b), np.arange(b), indexing="ij"), axis=-1).astype(np.float64)
-
-        def choose(block: Block) -> tuple[int, int]:
-            return self._choose(
-                Block(block.row, block.col, block.values[..., :c], block.known), rng, energies
-            )
-
+        choose = self._chooser(c, rng)
         for rows in fill_block_rows(
             shape,
             c + 2,
@@ -206,7 +223,7 @@ class Quilting(TextureSynthesizer):
             block_positions(shape[1], b, b - o),
             b,
             choose,
-            lambda block, corner: self._paste(block, corner, ex, offsets),
+            lambda block, corner: self._paste(block, corner, ex),
             reporter=Reporter(callback, "blocks"),
         ):
             yield rows[..., :c], rows[..., c:].astype(np.int32)
@@ -253,22 +270,15 @@ class Quilting(TextureSynthesizer):
         b = self.patch_size
         steps = self._torus_steps(shape)
         assert steps is not None  # torus_for(shape) holds
-        energies: dict = {}
-        offsets = np.stack(np.meshgrid(np.arange(b), np.arange(b), indexing="ij"), axis=-1).astype(np.float64)
         canvas = np.zeros(tuple(shape) + (c + 2,))
-
-        def choose(block: Block) -> tuple[int, int]:
-            return self._choose(
-                Block(block.row, block.col, block.values[..., :c], block.known), rng, energies
-            )
-
+        choose = self._chooser(c, rng)
         fill_blocks(
             canvas,
             steps[0],
             steps[1],
             b,
             choose,
-            lambda block, corner: self._paste(block, corner, ex, offsets, every_side=True),
+            lambda block, corner: self._paste(block, corner, ex, every_side=True),
             reporter=Reporter(callback, "blocks"),
             torus=True,
         )
@@ -332,7 +342,6 @@ class Quilting(TextureSynthesizer):
         hole_rows, hole_cols = np.nonzero(~known)
         rows = _covering_blocks(int(hole_rows.min()), int(hole_rows.max()) + 1, height, b, o)
         cols = _covering_blocks(int(hole_cols.min()), int(hole_cols.max()) + 1, width, b, o)
-        offsets = np.stack(np.meshgrid(np.arange(b), np.arange(b), indexing="ij"), axis=-1).astype(np.float64)
         energies: dict = {}
 
         def choose(block: Block) -> tuple[int, int]:
@@ -350,7 +359,7 @@ class Quilting(TextureSynthesizer):
             return self._pick(d, generator)
 
         def paste(block: Block, corner: tuple[int, int]) -> np.ndarray:
-            new = self._paste(block, corner, ex, offsets)
+            new = self._paste(block, corner, ex)
             kept = known[block.row : block.row + b, block.col : block.col + b]
             return np.where(kept[..., None], block.values, new)
 
@@ -478,7 +487,6 @@ class Quilting(TextureSynthesizer):
         target = np.pad(target_map, pad, mode="edge")
         before = None if previous is None else np.pad(as_channels(previous), pad, mode="edge")
         canvas = np.zeros((rows, cols, c + 2))
-        offsets = np.stack(np.meshgrid(np.arange(b), np.arange(b), indexing="ij"), axis=-1).astype(np.float64)
         energies: dict = {}
         map_weights = np.full((b, b, g), map_weight / (b * b * g))
 
@@ -500,7 +508,7 @@ class Quilting(TextureSynthesizer):
             block_positions(shape[1], b, b - o),
             b,
             choose,
-            lambda block, corner: self._paste(block, corner, ex, offsets),
+            lambda block, corner: self._paste(block, corner, ex),
             reporter=reporter,
         )
         return canvas[: shape[0], : shape[1], :c], canvas[: shape[0], : shape[1], c:]
