@@ -130,6 +130,21 @@ def test_estimates_grow_with_the_output_and_the_exemplar(method_name):
     assert large < 64 * 2**30  # no absurd estimate for an ordinary request
 
 
+def test_mslg_fit_estimate_bounds_its_traced_peak_with_the_highpass_histograms():
+    """The fit keeps the exemplar's high-pass histograms; the estimate counts them."""
+    import tracemalloc
+
+    exemplar = np.random.default_rng(0).random((256, 256, 3)).astype(np.float32)
+    method = texsyn.make_method("mslg")
+    tracemalloc.start()
+    try:
+        method.fit(exemplar)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak <= method.estimate_memory(exemplar.shape) <= 1.25 * peak
+
+
 def test_estimates_follow_the_parameters_that_keep_arrays():
     ex = (128, 128, 3)
     assert texsyn.make_method("sparse", n_atoms=512).estimate_memory(ex) > texsyn.make_method(
