@@ -54,7 +54,7 @@ _SQRT2 = math.sqrt(2.0)
 
 #: updates (images x (L+1) x pixels) from which a transform runs its images on numba's
 #: threads, in one block of interleaved images per worker
-PARALLEL_UPDATES = 1 << 20
+PARALLEL_UPDATES = 1 << 18
 
 
 def checked_associations(associations: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
@@ -158,6 +158,20 @@ def _schedule(targets, orders, masses):
             acc[p] = big_s + sm
     low = np.sqrt(masses[levels] / 2.0)
     return dst, detail, share, low
+
+
+@jit()
+def _plan(targets):
+    """The whole schedule of association fields ``(L, N)`` in one kernel (one cached function to
+    load instead of three): each level's :func:`_scan_order`, the :func:`_masses` and the
+    merges of :func:`_schedule`, computed by those functions."""
+    levels, n = targets.shape
+    orders = np.empty((levels, n), dtype=np.int64)
+    for lv in range(levels):
+        orders[lv] = _scan_order(targets[lv])
+    masses = _masses(targets, orders)
+    dst, detail, share, low = _schedule(targets, orders, masses)
+    return orders, masses, dst, detail, share, low
 
 
 @jit()
@@ -344,11 +358,8 @@ class GroupletTightFrame:
         self.shape = (int(shape[0]), int(shape[1]))
         self.levels = a.shape[0]
         self.tau = grouplet_weights(self.levels)
-        self.orders = np.empty_like(a)
-        for level in range(self.levels):
-            self.orders[level] = _scan_order(a[level])
-        self.masses = _masses(a, self.orders)
-        self._merges = _schedule(a, self.orders, self.masses)
+        self.orders, self.masses, *merges = _plan(a)
+        self._merges = tuple(merges)
         dst, detail, share, low = self._merges
         factors = np.empty((self.levels + 1, a.shape[1]))
         for level in range(self.levels):

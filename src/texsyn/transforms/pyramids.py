@@ -9,9 +9,8 @@ the undecimated Laplacian pyramid of Peyré's grouplets (2008, section 2.3). Lev
 from __future__ import annotations
 
 import numpy as np
-import scipy.fft as sfft
 
-from ..ops.linalg import worker_count
+from ..ops.linalg import parallel_map, worker_count
 from .steerable import radial_lowpass
 
 __all__ = [
@@ -119,6 +118,43 @@ def gaussian_pyramid(
     return out
 
 
+def _on_workers(transform, lines: int) -> None:
+    """``transform(slice)`` of ``lines`` lines, split into one contiguous run per worker thread
+    (NumPy's FFTs release the GIL; each line is computed alone, so the bytes do not depend on
+    the split)."""
+    workers = max(1, min(worker_count(), lines))
+    bounds = [lines * i // workers for i in range(workers + 1)]
+    parallel_map(transform, [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:])])
+
+
+def _rfft2(x: np.ndarray) -> np.ndarray:
+    """``scipy.fft.rfft2`` over the last two axes, the same bytes, with NumPy's FFT (the same
+    pocketfft: rows, then columns) on texsyn's worker threads, so that the grouplet method
+    does not import ``scipy.fft`` (``docs/methods/grouplets.md``, "Performance")."""
+    spectrum = np.empty(x.shape[:-1] + (x.shape[-1] // 2 + 1,), dtype=np.complex128)
+    _on_workers(lambda rows: np.fft.rfft(x[..., rows, :], axis=-1, out=spectrum[..., rows, :]), x.shape[-2])
+    _on_workers(lambda cols: np.fft.fft(spectrum[..., cols], axis=-2, out=spectrum[..., cols]), spectrum.shape[-1])
+    return spectrum
+
+
+def _irfft2(spectrum: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """``scipy.fft.irfft2(spectrum, s=shape)`` over the last two axes, the same bytes: NumPy's
+    unscaled inverse (columns in place, then rows) times ``1 / (H W)`` once, as pocketfft
+    scales its last pass; ``spectrum`` is overwritten."""
+    h, w = shape
+    _on_workers(
+        lambda cols: np.fft.ifft(spectrum[..., cols], axis=-2, norm="forward", out=spectrum[..., cols]),
+        spectrum.shape[-1],
+    )
+    image = np.empty(spectrum.shape[:-1] + (w,))
+    _on_workers(
+        lambda rows: np.fft.irfft(spectrum[..., rows, :], n=w, axis=-1, norm="forward", out=image[..., rows, :]),
+        h,
+    )
+    image *= 1.0 / (h * w)
+    return image
+
+
 class LaplacianTightFrame:
     """Translation-invariant Laplacian pyramid as a Parseval tight frame.
 
@@ -199,9 +235,8 @@ class LaplacianTightFrame:
 
     def _forward_chunk(self, x: np.ndarray, product: np.ndarray | None) -> np.ndarray:
         """Bands ``(J+1, b, H, W)`` of ``b`` images; ``product``: where to filter their spectra."""
-        spectrum = sfft.rfft2(x, axes=(1, 2), workers=worker_count())
-        filtered = np.multiply(self.filters[:, None], spectrum[None], out=product)
-        return sfft.irfft2(filtered, s=self.shape, axes=(2, 3), workers=worker_count())
+        filtered = np.multiply(self.filters[:, None], _rfft2(x)[None], out=product)
+        return _irfft2(filtered, self.shape)
 
     def inverse_planes(self, bands: np.ndarray) -> np.ndarray:
         """Images ``(B, H, W)`` from bands ``(J+1, B, H, W)`` (the adjoint of :meth:`forward_planes`).
@@ -212,9 +247,9 @@ class LaplacianTightFrame:
         step = self._chunk(b.shape[1])
         images = []
         for b0 in range(0, b.shape[1], step):
-            spectra = sfft.rfft2(b[:, b0 : b0 + step], axes=(2, 3), workers=worker_count())
+            spectra = _rfft2(b[:, b0 : b0 + step])
             total = np.sum(np.multiply(self.filters[:, None], spectra, out=spectra), axis=0)
-            images.append(sfft.irfft2(total, s=self.shape, axes=(1, 2), workers=worker_count()))
+            images.append(_irfft2(total, self.shape))
         return images[0] if len(images) == 1 else np.concatenate(images)
 
     def _chunk(self, planes: int) -> int:
