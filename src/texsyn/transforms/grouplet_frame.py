@@ -185,6 +185,11 @@ def _forward_block(images, src, dst, detail, share, low, scales, normalized, out
     the same bytes (``tests/test_grouplet_frame.py``). With ``normalized`` each coefficient is
     then divided by ``scales[l, m]``. ``work`` ``(2, B * N)`` holds the two interleaved
     residuals (columns ``b0 N .. b1 N``). Returns the updates per image.
+
+    The residual of a level starts as its input, ``r = a``: the targets ``dst`` of a level
+    ascend (:func:`_scan_order` groups the merges by target), so the pixels up to each
+    group's target are copied when the scan reaches it, while their rows are in the cache,
+    instead of in a pass of their own.
     """
     levels, n = src.shape
     nb = b1 - b0
@@ -195,10 +200,15 @@ def _forward_block(images, src, dst, detail, share, low, scales, normalized, out
     r = work[1, n * b0 : n * b1].reshape(n, nb)
     count = 0
     for lv in range(levels):
-        r[:] = a  # the residual, updated in place
+        unset = 0  # the residuals of the pixels below it hold their start, a
         for k in range(n):
             m = src[lv, k]
             p = dst[lv, k]
+            if p >= unset:  # the group of p starts: r = a up to p
+                for q in range(unset, p + 1):
+                    for b in range(nb):
+                        r[q, b] = a[q, b]
+                unset = p + 1
             f = detail[lv, k]
             g = share[lv, k]
             for b in range(nb):
@@ -207,6 +217,9 @@ def _forward_block(images, src, dst, detail, share, low, scales, normalized, out
                 out[lv, b0 + b, m] = d / scales[lv, m] if normalized else d
                 r[p, b] += g * diff
             count += 1
+        for q in range(unset, n):
+            for b in range(nb):
+                r[q, b] = a[q, b]
         a, r = r, a
     for m in range(n):
         for b in range(nb):

@@ -137,16 +137,16 @@ def _rfft2(x: np.ndarray) -> np.ndarray:
     return spectrum
 
 
-def _irfft2(spectrum: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+def _irfft2(spectrum: np.ndarray, shape: tuple[int, int], out: np.ndarray | None = None) -> np.ndarray:
     """``scipy.fft.irfft2(spectrum, s=shape)`` over the last two axes, the same bytes: NumPy's
     unscaled inverse (columns in place, then rows) times ``1 / (H W)`` once, as pocketfft
-    scales its last pass; ``spectrum`` is overwritten."""
+    scales its last pass; ``spectrum`` is overwritten. ``out``: where to write the images."""
     h, w = shape
     _on_workers(
         lambda cols: np.fft.ifft(spectrum[..., cols], axis=-2, norm="forward", out=spectrum[..., cols]),
         spectrum.shape[-1],
     )
-    image = np.empty(spectrum.shape[:-1] + (w,))
+    image = np.empty(spectrum.shape[:-1] + (w,)) if out is None else out
     _on_workers(
         lambda rows: np.fft.irfft(spectrum[..., rows, :], n=w, axis=-1, norm="forward", out=image[..., rows, :]),
         h,
@@ -230,13 +230,16 @@ class LaplacianTightFrame:
                 product = np.empty(
                     (len(self.filters), len(chunk)) + self.filters[0].shape, dtype=np.complex128
                 )
-            result[:, b0 : b0 + step] = self._forward_chunk(chunk, product)
+            self._forward_chunk(chunk, product, result[:, b0 : b0 + step])
         return result
 
-    def _forward_chunk(self, x: np.ndarray, product: np.ndarray | None) -> np.ndarray:
-        """Bands ``(J+1, b, H, W)`` of ``b`` images; ``product``: where to filter their spectra."""
+    def _forward_chunk(
+        self, x: np.ndarray, product: np.ndarray | None, out: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Bands ``(J+1, b, H, W)`` of ``b`` images; ``product``: where to filter their spectra,
+        ``out``: where to write the bands."""
         filtered = np.multiply(self.filters[:, None], _rfft2(x)[None], out=product)
-        return _irfft2(filtered, self.shape)
+        return _irfft2(filtered, self.shape, out)
 
     def inverse_planes(self, bands: np.ndarray) -> np.ndarray:
         """Images ``(B, H, W)`` from bands ``(J+1, B, H, W)`` (the adjoint of :meth:`forward_planes`).
