@@ -8,6 +8,8 @@ the undecimated Laplacian pyramid of Peyré's grouplets (2008, section 2.3). Lev
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from ..ops.linalg import parallel_map, worker_count
@@ -127,31 +129,44 @@ def _on_workers(transform, lines: int) -> None:
     parallel_map(transform, [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:])])
 
 
-def _rfft2(x: np.ndarray) -> np.ndarray:
-    """``scipy.fft.rfft2`` over the last two axes, the same bytes, with NumPy's FFT (the same
-    pocketfft: rows, then columns) on texsyn's worker threads, so that the grouplet method
-    does not import ``scipy.fft`` (``docs/methods/grouplets.md``, "Performance")."""
-    spectrum = np.empty(x.shape[:-1] + (x.shape[-1] // 2 + 1,), dtype=np.complex128)
-    _on_workers(lambda rows: np.fft.rfft(x[..., rows, :], axis=-1, out=spectrum[..., rows, :]), x.shape[-2])
-    _on_workers(lambda cols: np.fft.fft(spectrum[..., cols], axis=-2, out=spectrum[..., cols]), spectrum.shape[-1])
-    return spectrum
+def _filtered(
+    x: np.ndarray,
+    spectral: Callable[[np.ndarray, slice], object],
+    columns: np.ndarray,
+    out: np.ndarray | None = None,
+) -> np.ndarray:
+    """``irfft2(spectral(rfft2(x)))`` over the last two axes, with the bytes of ``scipy.fft``'s
+    transforms, on texsyn's worker threads.
 
+    NumPy's FFT is the same pocketfft (``rfft2``: rows, then columns; ``irfft2``: columns,
+    then rows, scaled by ``1 / (H W)`` once at the end, which is NumPy's unscaled inverse times
+    that factor), so the grouplet method does not import ``scipy.fft``
+    (``docs/methods/grouplets.md``, "Performance"). The work is split in runs of rows, then of
+    columns, then of rows: each worker filters its columns between their forward and inverse
+    transforms (``spectral(columns of the spectra, slice)`` writes the filtered columns into
+    that slice of ``columns``, complex, of shape ``(..., H, W // 2 + 1)``), so the filtering
+    runs on the threads with no pass of its own. Every line is computed alone, so the bytes
+    do not depend on the split. ``out``: where to write the images.
+    """
+    h, w = x.shape[-2:]
+    spectrum = np.empty(x.shape[:-1] + (w // 2 + 1,), dtype=np.complex128)
+    image = np.empty(columns.shape[:-1] + (w,)) if out is None else out
 
-def _irfft2(spectrum: np.ndarray, shape: tuple[int, int], out: np.ndarray | None = None) -> np.ndarray:
-    """``scipy.fft.irfft2(spectrum, s=shape)`` over the last two axes, the same bytes: NumPy's
-    unscaled inverse (columns in place, then rows) times ``1 / (H W)`` once, as pocketfft
-    scales its last pass; ``spectrum`` is overwritten. ``out``: where to write the images."""
-    h, w = shape
-    _on_workers(
-        lambda cols: np.fft.ifft(spectrum[..., cols], axis=-2, norm="forward", out=spectrum[..., cols]),
-        spectrum.shape[-1],
-    )
-    image = np.empty(spectrum.shape[:-1] + (w,)) if out is None else out
-    _on_workers(
-        lambda rows: np.fft.irfft(spectrum[..., rows, :], n=w, axis=-1, norm="forward", out=image[..., rows, :]),
-        h,
-    )
-    image *= 1.0 / (h * w)
+    def forward_rows(rows: slice) -> None:
+        np.fft.rfft(x[..., rows, :], axis=-1, out=spectrum[..., rows, :])
+
+    def filter_columns(cols: slice) -> None:
+        np.fft.fft(spectrum[..., cols], axis=-2, out=spectrum[..., cols])
+        spectral(spectrum[..., cols], cols)
+        np.fft.ifft(columns[..., cols], axis=-2, norm="forward", out=columns[..., cols])
+
+    def inverse_rows(rows: slice) -> None:
+        np.fft.irfft(columns[..., rows, :], n=w, axis=-1, norm="forward", out=image[..., rows, :])
+        image[..., rows, :] *= 1.0 / (h * w)
+
+    _on_workers(forward_rows, h)
+    _on_workers(filter_columns, spectrum.shape[-1])
+    _on_workers(inverse_rows, h)
     return image
 
 
@@ -238,8 +253,14 @@ class LaplacianTightFrame:
     ) -> np.ndarray:
         """Bands ``(J+1, b, H, W)`` of ``b`` images; ``product``: where to filter their spectra,
         ``out``: where to write the bands."""
-        filtered = np.multiply(self.filters[:, None], _rfft2(x)[None], out=product)
-        return _irfft2(filtered, self.shape, out)
+        bands = (len(self.filters),) + x.shape[:-1] + self.filters[0].shape[-1:]
+        product = np.empty(bands, dtype=np.complex128) if product is None else product
+        filters = self.filters[:, None]
+
+        def band_spectra(spectra: np.ndarray, cols: slice) -> None:
+            np.multiply(filters[..., cols], spectra[None], out=product[..., cols])
+
+        return _filtered(x, band_spectra, product, out)
 
     def inverse_planes(self, bands: np.ndarray) -> np.ndarray:
         """Images ``(B, H, W)`` from bands ``(J+1, B, H, W)`` (the adjoint of :meth:`forward_planes`).
@@ -250,9 +271,14 @@ class LaplacianTightFrame:
         step = self._chunk(b.shape[1])
         images = []
         for b0 in range(0, b.shape[1], step):
-            spectra = _rfft2(b[:, b0 : b0 + step])
-            total = np.sum(np.multiply(self.filters[:, None], spectra, out=spectra), axis=0)
-            images.append(_irfft2(total, self.shape))
+            chunk = b[:, b0 : b0 + step]
+            total = np.empty(chunk.shape[1:-1] + self.filters[0].shape[-1:], dtype=np.complex128)
+
+            def band_sum(spectra: np.ndarray, cols: slice, total: np.ndarray = total) -> None:
+                # sum_j filter_j spectrum_j of these columns (the spectra are overwritten)
+                np.sum(np.multiply(self.filters[:, None, :, cols], spectra, out=spectra), axis=0, out=total[..., cols])
+
+            images.append(_filtered(chunk, band_sum, total))
         return images[0] if len(images) == 1 else np.concatenate(images)
 
     def _chunk(self, planes: int) -> int:
