@@ -161,13 +161,15 @@ _TIE_BLOCK = 64
 
 
 @jit()
-def _ties_in(keys, start, stop, s):
-    """Whether a key of ``keys[start:stop]`` shares its high bits (above ``s``) with the next
-    key. No early exit, so that the comparisons vectorise."""
-    found = 0
-    for k in range(start, stop):
-        found |= ((keys[k] ^ keys[k + 1]) >> s) == 0
-    return found != 0
+def _ties_in(keys, start, s):
+    """Whether a key of ``keys[start : start + _TIE_BLOCK]`` shares its high bits (above ``s``)
+    with the next key. No early exit, and a window of a fixed length, so that the comparisons
+    vectorise."""
+    window = keys[start : start + _TIE_BLOCK + 1]
+    found = False
+    for k in range(_TIE_BLOCK):
+        found |= ((window[k] ^ window[k + 1]) >> s) == 0
+    return found
 
 
 @jit()
@@ -185,7 +187,7 @@ def _canonical_keys(x, bits, keys, shift):
     mask = (np.uint64(1) << s) - np.uint64(1)
     k = 0
     while k < n - 1:
-        if k + _TIE_BLOCK < n and not _ties_in(keys, k, k + _TIE_BLOCK, s):
+        if k + _TIE_BLOCK < n and not _ties_in(keys, k, s):
             k += _TIE_BLOCK
             continue
         high = keys[k] >> s
