@@ -228,6 +228,10 @@ def _scatter_rows(x, bits, keys, shift, targets, rows, out, start, stop):
         _canonical_keys(x[i], bits[i], key, shift)
         target = targets[rows[i]]
         row = out[i]
+        # every value of the row is written below, in random order; writing the row in order
+        # first brings its lines into the cache at streaming speed instead of one miss per
+        # write (about 4 -> 2.3 ns a value on rows of 65536, never slower on longer ones)
+        row[:] = 0.0
         for k in range(n):
             row[np.int64(key[k] & mask)] = target[k]
 
