@@ -17,7 +17,7 @@ import sys
 
 import numpy as np
 
-from .jit import jit, prange
+from .jit import LazyKernel, jit, prange
 from .linalg import parallel_map, worker_count
 
 __all__ = [
@@ -256,8 +256,17 @@ def _order_rows(x, bits, keys, shift, order, runs, start, stop):
 PARALLEL_RANK_VALUES = 1 << 20
 
 
-def _on_threads(x: np.ndarray) -> bool:
-    return x.shape[0] > 1 and x.size >= PARALLEL_RANK_VALUES and worker_count() > 1
+#: values from which the rank kernels run the rows on numba's threads once their threaded
+#: versions are loaded in the process: then a few rows of an image (the pixels of a 256 x 256
+#: colour synthesis, after its bands) need not load the one-thread kernels as well
+LOADED_PARALLEL_RANK_VALUES = 1 << 16
+
+
+def _on_threads(x: np.ndarray, kernel: LazyKernel) -> bool:
+    """Whether to rank the rows of ``x`` with ``kernel``, the threaded version."""
+    if x.shape[0] <= 1 or worker_count() <= 1:
+        return False
+    return x.size >= PARALLEL_RANK_VALUES or (x.size >= LOADED_PARALLEL_RANK_VALUES and kernel.loaded)
 
 
 def _packed_keys(x: np.ndarray, bits: np.ndarray, shift: int, out: np.ndarray | None = None) -> np.ndarray:
@@ -265,7 +274,7 @@ def _packed_keys(x: np.ndarray, bits: np.ndarray, shift: int, out: np.ndarray | 
     keys = np.empty(x.shape, dtype=np.uint64) if out is None else out
     if keys.shape != x.shape or keys.dtype != np.uint64 or not keys.flags.c_contiguous:
         raise ValueError(f"keys must be a C-contiguous uint64 array of shape {x.shape}")
-    if _on_threads(x):
+    if _on_threads(x, _packed_keys_parallel):
         _packed_keys_parallel(x, bits, shift, keys)
     else:
         _packed_keys_rows(x, bits, shift, keys, 0, x.shape[0])
@@ -294,7 +303,7 @@ def scatter_by_key(x, keys, shift: int, targets, rows, out: np.ndarray | None = 
     """
     bits = x.view(np.uint64)
     out = np.empty_like(x) if out is None else out
-    if _on_threads(x):
+    if _on_threads(x, _scatter_parallel):
         _scatter_parallel(x, bits, keys, shift, targets, rows, out)
     else:
         _scatter_rows(x, bits, keys, shift, targets, rows, out, 0, x.shape[0])
