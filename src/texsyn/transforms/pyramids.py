@@ -165,7 +165,7 @@ def _filtered(
         image[..., rows, :] *= 1.0 / (h * w)
 
     _on_workers(forward_rows, h)
-    _on_workers(filter_columns, spectrum.shape[-1])
+    _on_workers(filter_columns, w // 2 + 1)
     _on_workers(inverse_rows, h)
     return image
 
@@ -276,7 +276,11 @@ class LaplacianTightFrame:
 
             def band_sum(spectra: np.ndarray, cols: slice, total: np.ndarray = total) -> None:
                 # sum_j filter_j spectrum_j of these columns (the spectra are overwritten)
-                np.sum(np.multiply(self.filters[:, None, :, cols], spectra, out=spectra), axis=0, out=total[..., cols])
+                np.sum(
+                    np.multiply(self.filters[:, None, :, cols], spectra, out=spectra),
+                    axis=0,
+                    out=total[..., cols],
+                )
 
             images.append(_filtered(chunk, band_sum, total))
         return images[0] if len(images) == 1 else np.concatenate(images)
