@@ -119,16 +119,21 @@ def test_periodic_component_of_a_periodic_smooth_image_is_close_to_itself():
     assert np.abs(s).max() < 0.05
 
 
+@pytest.mark.parametrize("threaded", [False, True])
 @pytest.mark.parametrize("quantum", [None, 0.5, 0.1, "ulp", "sparse"])
-def test_numpy_and_compiled_rank_scatters_give_the_same_bytes(quantum):
+def test_numpy_and_compiled_rank_scatters_give_the_same_bytes(monkeypatch, quantum, threaded):
     """``match_sorted_rows`` uses NumPy until numba is loaded (start-up, issue 20) and the
     compiled packed-key ranks after: both put equal values in position order, and values
     that differ only in their last bits (a run of equal high key bits) in value order.
     'sparse': a few short runs among distinct values, some across the blocks of keys the
-    compiled kernel passes over at once when they hold no run."""
+    compiled kernel passes over at once when they hold no run. ``threaded``: the rows on
+    numba's threads (the kernels used from ``PARALLEL_RANK_VALUES`` values, or once loaded)."""
+    from texsyn.ops import ranks
     from texsyn.ops.histogram import _argsort_rows, _scatter_by_rank_numpy
     from texsyn.ops.ranks import scatter_by_key, sorted_keys
 
+    if threaded:
+        monkeypatch.setattr(ranks, "PARALLEL_RANK_VALUES", 1)
     rng = np.random.default_rng(3)
     x = rng.standard_normal((5, 3000))
     if quantum == "ulp":

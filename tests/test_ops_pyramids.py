@@ -104,20 +104,23 @@ def test_steerable_pyramid_rejects_tiny_images():
 
 
 @pytest.mark.parametrize("per_call", [1, 2, 64])
-def test_laplacian_planes_a_few_at_a_time_are_the_bytes_of_one_call(monkeypatch, per_call):
+@pytest.mark.parametrize(("shape", "threads"), [((24, 20), "1"), ((24, 20), "3"), ((23, 17), "2")])
+def test_laplacian_planes_a_few_at_a_time_are_the_bytes_of_one_call(monkeypatch, per_call, shape, threads):
     """Issue 20: the tight frame transforms large stacks a few images per FFT call (bounded
-    temporaries) and into a reused ``out``; the bytes are those of one call on the stack."""
+    temporaries) and into a reused ``out``; the bytes are those of one call on the stack, and
+    those of ``scipy.fft`` (its NumPy FFTs split in runs of lines over any number of threads)."""
     import scipy.fft as sfft
 
     from texsyn.transforms import pyramids
     from texsyn.transforms.pyramids import LaplacianTightFrame
 
-    frame = LaplacianTightFrame((24, 20), 3)
-    planes = np.random.default_rng(5).standard_normal((5, 24, 20))
+    monkeypatch.setenv("TEXSYN_NUM_THREADS", threads)
+    frame = LaplacianTightFrame(shape, 3)
+    planes = np.random.default_rng(5).standard_normal((5,) + shape)
     spectrum = sfft.rfft2(planes, axes=(1, 2))
-    bands = sfft.irfft2(frame.filters[:, None] * spectrum[None], s=(24, 20), axes=(2, 3))
+    bands = sfft.irfft2(frame.filters[:, None] * spectrum[None], s=shape, axes=(2, 3))
     spectra = sfft.rfft2(bands, axes=(2, 3))
-    images = sfft.irfft2(np.sum(frame.filters[:, None] * spectra, axis=0), s=(24, 20), axes=(1, 2))
+    images = sfft.irfft2(np.sum(frame.filters[:, None] * spectra, axis=0), s=shape, axes=(1, 2))
     monkeypatch.setattr(pyramids, "SPECTRUM_VALUES", per_call * frame.filters.size)
     out = np.empty_like(bands)
     assert frame.forward_planes(planes, out=out) is out

@@ -105,14 +105,22 @@ def hist_target_rows(n: int, references_sorted: np.ndarray) -> np.ndarray:
 @jit(nogil=True)
 def _ot_targets(ys, cums, n, out, start, stop):
     """Rows ``start .. stop - 1`` of :func:`hist_target_rows`: ``hist_target``'s ``integral``
-    at ``t = j / n`` and its differences, scaled by ``n``, in the same floating-point order."""
+    at ``t = j / n`` and its differences, scaled by ``n``, in the same floating-point order.
+    The index ``k`` and the offset ``t - k / N_y`` of each ``t`` are the same for every row:
+    computed once."""
     ny = ys.shape[1]
+    index = np.empty(n + 1, dtype=np.int64)
+    offset = np.empty(n + 1)
+    for j in range(n + 1):
+        t = j / n
+        k = min(np.int64(math.floor(t * ny)), ny - 1)
+        index[j] = k
+        offset[j] = t - k / ny
     for i in range(start, stop):
         previous = 0.0
         for j in range(n + 1):
-            t = j / n
-            k = min(np.int64(math.floor(t * ny)), ny - 1)
-            edge = cums[i, k] + (t - k / ny) * ys[i, k]
+            k = index[j]
+            edge = cums[i, k] + offset[j] * ys[i, k]
             if j > 0:
                 out[i, j - 1] = n * (edge - previous)
             previous = edge

@@ -54,7 +54,7 @@ _SQRT2 = math.sqrt(2.0)
 
 #: updates (images x (L+1) x pixels) from which a transform runs its images on numba's
 #: threads, in one block of interleaved images per worker
-PARALLEL_UPDATES = 1 << 20
+PARALLEL_UPDATES = 1 << 18
 
 
 def checked_associations(associations: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
@@ -161,6 +161,20 @@ def _schedule(targets, orders, masses):
 
 
 @jit()
+def _plan(targets):
+    """The whole schedule of association fields ``(L, N)`` in one kernel (one cached function to
+    load instead of three): each level's :func:`_scan_order`, the :func:`_masses` and the
+    merges of :func:`_schedule`, computed by those functions."""
+    levels, n = targets.shape
+    orders = np.empty((levels, n), dtype=np.int64)
+    for lv in range(levels):
+        orders[lv] = _scan_order(targets[lv])
+    masses = _masses(targets, orders)
+    dst, detail, share, low = _schedule(targets, orders, masses)
+    return orders, masses, dst, detail, share, low
+
+
+@jit()
 def _forward_block(images, src, dst, detail, share, low, scales, normalized, out, work, b0, b1):
     """The sequential in-place scan of images ``b0 .. b1 - 1`` of ``(B, N)`` together, into ``out`` ``(L+1, B, N)``.
 
@@ -171,6 +185,11 @@ def _forward_block(images, src, dst, detail, share, low, scales, normalized, out
     the same bytes (``tests/test_grouplet_frame.py``). With ``normalized`` each coefficient is
     then divided by ``scales[l, m]``. ``work`` ``(2, B * N)`` holds the two interleaved
     residuals (columns ``b0 N .. b1 N``). Returns the updates per image.
+
+    The residual of a level starts as its input, ``r = a``: the targets ``dst`` of a level
+    ascend (:func:`_scan_order` groups the merges by target), so the pixels up to each
+    group's target are copied when the scan reaches it, while their rows are in the cache,
+    instead of in a pass of their own.
     """
     levels, n = src.shape
     nb = b1 - b0
@@ -181,10 +200,15 @@ def _forward_block(images, src, dst, detail, share, low, scales, normalized, out
     r = work[1, n * b0 : n * b1].reshape(n, nb)
     count = 0
     for lv in range(levels):
-        r[:] = a  # the residual, updated in place
+        unset = 0  # the residuals of the pixels below it hold their start, a
         for k in range(n):
             m = src[lv, k]
             p = dst[lv, k]
+            if p >= unset:  # the group of p starts: r = a up to p
+                for q in range(unset, p + 1):
+                    for b in range(nb):
+                        r[q, b] = a[q, b]
+                unset = p + 1
             f = detail[lv, k]
             g = share[lv, k]
             for b in range(nb):
@@ -193,6 +217,9 @@ def _forward_block(images, src, dst, detail, share, low, scales, normalized, out
                 out[lv, b0 + b, m] = d / scales[lv, m] if normalized else d
                 r[p, b] += g * diff
             count += 1
+        for q in range(unset, n):
+            for b in range(nb):
+                r[q, b] = a[q, b]
         a, r = r, a
     for m in range(n):
         for b in range(nb):
@@ -344,11 +371,8 @@ class GroupletTightFrame:
         self.shape = (int(shape[0]), int(shape[1]))
         self.levels = a.shape[0]
         self.tau = grouplet_weights(self.levels)
-        self.orders = np.empty_like(a)
-        for level in range(self.levels):
-            self.orders[level] = _scan_order(a[level])
-        self.masses = _masses(a, self.orders)
-        self._merges = _schedule(a, self.orders, self.masses)
+        self.orders, self.masses, *merges = _plan(a)
+        self._merges = tuple(merges)
         dst, detail, share, low = self._merges
         factors = np.empty((self.levels + 1, a.shape[1]))
         for level in range(self.levels):

@@ -8,10 +8,11 @@ the undecimated Laplacian pyramid of Peyré's grouplets (2008, section 2.3). Lev
 
 from __future__ import annotations
 
-import numpy as np
-import scipy.fft as sfft
+from collections.abc import Callable
 
-from ..ops.linalg import worker_count
+import numpy as np
+
+from ..ops.linalg import parallel_map, worker_count
 from .steerable import radial_lowpass
 
 __all__ = [
@@ -119,6 +120,56 @@ def gaussian_pyramid(
     return out
 
 
+def _on_workers(transform, lines: int) -> None:
+    """``transform(slice)`` of ``lines`` lines, split into one contiguous run per worker thread
+    (NumPy's FFTs release the GIL; each line is computed alone, so the bytes do not depend on
+    the split)."""
+    workers = max(1, min(worker_count(), lines))
+    bounds = [lines * i // workers for i in range(workers + 1)]
+    parallel_map(transform, [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:])])
+
+
+def _filtered(
+    x: np.ndarray,
+    spectral: Callable[[np.ndarray, slice], object],
+    columns: np.ndarray,
+    out: np.ndarray | None = None,
+) -> np.ndarray:
+    """``irfft2(spectral(rfft2(x)))`` over the last two axes, with the bytes of ``scipy.fft``'s
+    transforms, on texsyn's worker threads.
+
+    NumPy's FFT is the same pocketfft (``rfft2``: rows, then columns; ``irfft2``: columns,
+    then rows, scaled by ``1 / (H W)`` once at the end, which is NumPy's unscaled inverse times
+    that factor), so the grouplet method does not import ``scipy.fft``
+    (``docs/methods/grouplets.md``, "Performance"). The work is split in runs of rows, then of
+    columns, then of rows: each worker filters its columns between their forward and inverse
+    transforms (``spectral(columns of the spectra, slice)`` writes the filtered columns into
+    that slice of ``columns``, complex, of shape ``(..., H, W // 2 + 1)``), so the filtering
+    runs on the threads with no pass of its own. Every line is computed alone, so the bytes
+    do not depend on the split. ``out``: where to write the images.
+    """
+    h, w = x.shape[-2:]
+    spectrum = np.empty(x.shape[:-1] + (w // 2 + 1,), dtype=np.complex128)
+    image = np.empty(columns.shape[:-1] + (w,)) if out is None else out
+
+    def forward_rows(rows: slice) -> None:
+        np.fft.rfft(x[..., rows, :], axis=-1, out=spectrum[..., rows, :])
+
+    def filter_columns(cols: slice) -> None:
+        np.fft.fft(spectrum[..., cols], axis=-2, out=spectrum[..., cols])
+        spectral(spectrum[..., cols], cols)
+        np.fft.ifft(columns[..., cols], axis=-2, norm="forward", out=columns[..., cols])
+
+    def inverse_rows(rows: slice) -> None:
+        np.fft.irfft(columns[..., rows, :], n=w, axis=-1, norm="forward", out=image[..., rows, :])
+        image[..., rows, :] *= 1.0 / (h * w)
+
+    _on_workers(forward_rows, h)
+    _on_workers(filter_columns, w // 2 + 1)
+    _on_workers(inverse_rows, h)
+    return image
+
+
 class LaplacianTightFrame:
     """Translation-invariant Laplacian pyramid as a Parseval tight frame.
 
@@ -194,14 +245,22 @@ class LaplacianTightFrame:
                 product = np.empty(
                     (len(self.filters), len(chunk)) + self.filters[0].shape, dtype=np.complex128
                 )
-            result[:, b0 : b0 + step] = self._forward_chunk(chunk, product)
+            self._forward_chunk(chunk, product, result[:, b0 : b0 + step])
         return result
 
-    def _forward_chunk(self, x: np.ndarray, product: np.ndarray | None) -> np.ndarray:
-        """Bands ``(J+1, b, H, W)`` of ``b`` images; ``product``: where to filter their spectra."""
-        spectrum = sfft.rfft2(x, axes=(1, 2), workers=worker_count())
-        filtered = np.multiply(self.filters[:, None], spectrum[None], out=product)
-        return sfft.irfft2(filtered, s=self.shape, axes=(2, 3), workers=worker_count())
+    def _forward_chunk(
+        self, x: np.ndarray, product: np.ndarray | None, out: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Bands ``(J+1, b, H, W)`` of ``b`` images; ``product``: where to filter their spectra,
+        ``out``: where to write the bands."""
+        bands = (len(self.filters),) + x.shape[:-1] + self.filters[0].shape[-1:]
+        product = np.empty(bands, dtype=np.complex128) if product is None else product
+        filters = self.filters[:, None]
+
+        def band_spectra(spectra: np.ndarray, cols: slice) -> None:
+            np.multiply(filters[..., cols], spectra[None], out=product[..., cols])
+
+        return _filtered(x, band_spectra, product, out)
 
     def inverse_planes(self, bands: np.ndarray) -> np.ndarray:
         """Images ``(B, H, W)`` from bands ``(J+1, B, H, W)`` (the adjoint of :meth:`forward_planes`).
@@ -212,9 +271,18 @@ class LaplacianTightFrame:
         step = self._chunk(b.shape[1])
         images = []
         for b0 in range(0, b.shape[1], step):
-            spectra = sfft.rfft2(b[:, b0 : b0 + step], axes=(2, 3), workers=worker_count())
-            total = np.sum(np.multiply(self.filters[:, None], spectra, out=spectra), axis=0)
-            images.append(sfft.irfft2(total, s=self.shape, axes=(1, 2), workers=worker_count()))
+            chunk = b[:, b0 : b0 + step]
+            total = np.empty(chunk.shape[1:-1] + self.filters[0].shape[-1:], dtype=np.complex128)
+
+            def band_sum(spectra: np.ndarray, cols: slice, total: np.ndarray = total) -> None:
+                # sum_j filter_j spectrum_j of these columns (the spectra are overwritten)
+                np.sum(
+                    np.multiply(self.filters[:, None, :, cols], spectra, out=spectra),
+                    axis=0,
+                    out=total[..., cols],
+                )
+
+            images.append(_filtered(chunk, band_sum, total))
         return images[0] if len(images) == 1 else np.concatenate(images)
 
     def _chunk(self, planes: int) -> int:
