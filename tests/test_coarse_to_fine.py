@@ -38,6 +38,23 @@ def test_the_walk_reports_levels_done_with_a_preview():
         coarse_to_fine(lambda level, coarser: level, 0)
 
 
+def test_a_listener_without_images_gets_no_preview_and_none_is_computed():
+    class Counts(list):
+        wants_images = False
+
+        def __call__(self, record):
+            self.append(record)
+
+    seen, previews = Counts(), []
+    reporter = Reporter(seen.append, "levels", 2)
+    assert reporter.active and reporter.wants_images
+    reporter = Reporter(seen, "levels", 2)
+    assert reporter.active and not reporter.wants_images
+    coarse_to_fine(lambda level, coarser: level, 2, reporter=reporter, preview=previews.append)
+    assert previews == [] and [p.image for p in seen] == [None, None]
+    assert not Reporter(Reporter(seen).relabel("outer"), "inner").wants_images  # relabel keeps it
+
+
 def test_dtcwt_levels_are_zero_based_the_finest_first():
     x = np.random.default_rng(0).random((32, 16))
     pyr = DTCWT(3).forward(x)

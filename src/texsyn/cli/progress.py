@@ -56,6 +56,10 @@ class ProgressBar:
         (``time.monotonic`` by default; tests pass a fake one).
     """
 
+    #: the bar and the JSON lines show counts, never the intermediate images
+    #: (:attr:`texsyn.ops.progress.Reporter.wants_images`)
+    wants_images = False
+
     def __init__(
         self, label: str, enabled: bool, delay: float = 1.0, clock: Callable[[], float] = time.monotonic
     ):

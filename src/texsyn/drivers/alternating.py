@@ -57,6 +57,6 @@ def alternate_projections(
     for k in range(n_iterations):
         state = step(state, k)
         if reporter is not None and reporter.active:
-            image = preview(state) if preview is not None else None
+            image = preview(state) if preview is not None and reporter.wants_images else None
             reporter(start + k + 1, image=image)  # type: ignore[arg-type]
     return state

@@ -76,6 +76,6 @@ def coarse_to_fine(
     for k, level in enumerate(reversed(range(n_levels))):
         coarser = states[level] = step(level, coarser)
         if reporter is not None and reporter.active:
-            image = preview(coarser) if preview is not None else None
+            image = preview(coarser) if preview is not None and reporter.wants_images else None
             reporter(k + 1, image=image)  # type: ignore[arg-type]
     return states

@@ -269,7 +269,7 @@ class PatchWavelet(TextureSynthesizer):
         coefficients = self._random_coefficients(transform.exemplar_shape, top, rng)
         report = Reporter(callback, "levels", top)
         if report.active:
-            report(0, image=transform.image(coefficients.coarse))
+            report(0, image=transform.image(coefficients.coarse) if report.wants_images else None)
         maps = coarse_to_fine(
             transform.inverse_step(coefficients),
             top,
