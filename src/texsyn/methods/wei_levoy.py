@@ -69,7 +69,7 @@ __all__ = ["WeiLevoy", "causal_offsets", "TSVQ"]  # TSVQ: from texsyn.ops.tsvq, 
 
 #: levels whose bank has at least this many rows are searched through a
 #: :class:`~texsyn.ops.search.BoundedNearestIndex` (the same rows as the plain product, proven)
-BOUNDED_SEARCH_ROWS = 2048
+BOUNDED_SEARCH_ROWS = 1024
 #: ... unless more than this share of its rows have another row at the same place (ties)
 TWINNED_ROWS = 0.01
 #: on a torus, the rows and columns around each wrap synthesised again with the full
@@ -356,7 +356,9 @@ class WeiLevoy(TextureSynthesizer):
                 best = tree.nearest(q)
             elif index is not None:  # seeds: the continuations of the left and upper sources
                 left, up = src[ys, xs - 1], src[ys - 1, xs]
-                seeds = np.stack([left - left % ew + (left + 1) % ew, (up + ew) % (eh * ew)], axis=1)
+                seeds = np.empty((ys.size, 2), dtype=np.int64)
+                seeds[:, 0] = left - left % ew + (left + 1) % ew
+                seeds[:, 1] = (up + ew) % (eh * ew)
                 best = nearest_rows_bounded(q, bank, norms, index, seeds, isolated)
             else:
                 best = nearest_rows(q, bank, norms)
