@@ -97,6 +97,16 @@ def _gather(image: np.ndarray, rows: np.ndarray, cols: np.ndarray, offsets: np.n
     return np.take(flat, rr * w + cc, axis=0).reshape(len(rows), -1)
 
 
+def _squared_norms(bank: np.ndarray, rows: int = 1024) -> np.ndarray:
+    """``np.sum(bank * bank, axis=1)``, the same sums, a block of rows at a time (no temporary
+    as large as the bank: its fresh pages cost system time)."""
+    out = np.empty(len(bank))
+    for start in range(0, len(bank), rows):
+        block = bank[start : start + rows]
+        np.sum(block * block, axis=1, out=out[start : start + rows])
+    return out
+
+
 class WeiLevoy(TextureSynthesizer):
     """Wei-Levoy synthesis: multiresolution raster-order pixel sampling.
 
@@ -220,12 +230,16 @@ class WeiLevoy(TextureSynthesizer):
         self.banks_, self.norms_, self.trees_, self.indexes_, self.isolated_ = [], [], [], [], []
         for level, image in enumerate(self.pyramid_):
             rows, cols = np.divmod(np.arange(image.shape[0] * image.shape[1]), image.shape[1])
-            parts = [_gather(image, rows, cols, self.causal_)]
-            if level + 1 < self.levels:
-                parts.append(_gather(self.pyramid_[level + 1], rows // 2, cols // 2, self.parent_))
-            bank = np.ascontiguousarray(np.concatenate(parts, axis=1))
+            # the causal part, then the parent square, gathered in place (as the queries are)
+            causal = len(self.causal_) * image.shape[2]
+            parent = len(self.parent_) * image.shape[2] if level + 1 < self.levels else 0
+            bank = np.empty((len(rows), causal + parent))
+            gather_wrapped(np.ascontiguousarray(image), rows, cols, self.causal_, bank)
+            if parent:
+                coarser = np.ascontiguousarray(self.pyramid_[level + 1])
+                gather_wrapped(coarser, rows // 2, cols // 2, self.parent_, bank, causal)
             self.banks_.append(bank)
-            self.norms_.append(np.sum(bank * bank, axis=1))
+            self.norms_.append(_squared_norms(bank))
             self.trees_.append(TSVQ(bank, self.leaf_size, rng) if self.search == "tsvq" else None)
             index = isolated = None
             if self.search == "exact" and len(bank) >= BOUNDED_SEARCH_ROWS:
