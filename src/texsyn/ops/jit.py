@@ -98,6 +98,9 @@ class LazyKernel:
         return f"<LazyKernel {self.py_func.__module__}.{self.py_func.__qualname__} ({state})>"
 
 
+_preload_lock = threading.Lock()
+
+
 def _preload_cython_blas() -> None:
     """Load SciPy's ``scipy.linalg.cython_blas`` on its own, without the ``scipy.linalg`` package.
 
@@ -108,13 +111,21 @@ def _preload_cython_blas() -> None:
     full name first makes that import a lookup. Nothing changes for a process that has
     ``scipy.linalg`` already, or where the module cannot be found: numba then imports it itself.
     """
+    import sys
+
+    name = "scipy.linalg.cython_blas"
+    with _preload_lock:
+        if name in sys.modules or "scipy.linalg" in sys.modules:
+            return
+        _load_alone(name)
+
+
+def _load_alone(name: str) -> None:
+    """Load the extension module ``name`` of SciPy's ``linalg`` without its package."""
     import importlib.machinery
     import importlib.util
     import sys
 
-    name = "scipy.linalg.cython_blas"
-    if name in sys.modules or "scipy.linalg" in sys.modules:
-        return
     try:
         scipy_spec = importlib.util.find_spec("scipy")
         if scipy_spec is None or not scipy_spec.submodule_search_locations:
