@@ -46,6 +46,18 @@ def test_gaussian_blur_periodic_matches_spatial_wrap_and_keeps_channels_apart():
     np.testing.assert_allclose(gaussian_blur(u, 1.5)[..., 1], grey, atol=1e-14)
 
 
+@pytest.mark.parametrize(("shape", "sigma"), [((33, 20, 3), 1.0), ((16, 9), 1.4), ((3, 7, 2), 2.3)])
+def test_gaussian_blur_is_scipys_mirrored_filter_byte_for_byte(shape, sigma):
+    """The NumPy blur (no ``scipy.ndimage`` at start-up) gives SciPy's bytes, in C order,
+    also where the kernel is longer than a side (the mirror of the mirror)."""
+    u = np.random.default_rng(6).random(shape) * 255
+    want = ndimage.gaussian_filter(
+        u, sigma=(sigma, sigma) + (0,) * (u.ndim - 2), mode="reflect", truncate=4.0
+    )
+    got = gaussian_blur(u, sigma)
+    assert got.tobytes() == want.tobytes() and got.flags.c_contiguous
+
+
 def test_gaussian_pyramid_sizes():
     levels = gaussian_pyramid(np.zeros((40, 24)), 3)
     assert [lv.shape for lv in levels] == [(40, 24), (20, 12), (10, 6)]

@@ -73,6 +73,28 @@ def test_synth_with_quilting_loads_quilting_only(tmp_path):
     assert "texsyn.cli.animation" not in modules and "texsyn.cli.comparison" not in modules
 
 
+def test_synth_with_wei_levoy_loads_no_scipy_filters_or_linear_algebra(tmp_path):
+    """The Gaussian pyramid is NumPy's, and numba finds its BLAS without ``scipy.linalg``."""
+    exemplar, out = tmp_path / "ex.png", tmp_path / "w.png"
+    write_image(exemplar, np.random.default_rng(0).random((32, 32, 3)))
+    args = [
+        "synth",
+        str(exemplar),
+        "-m",
+        "wei_levoy",
+        "--size",
+        "24x24",
+        "-p",
+        "levels=2",
+        "--seed",
+        "1",
+        "-q",
+    ]
+    modules = loaded_after(f"from texsyn.cli import main\nassert main({args + ['-o', str(out)]!r}) == 0")
+    assert out.exists() and "numba" in modules
+    assert not {"scipy.ndimage", "scipy.special", "scipy.fft", "scipy.linalg"} & modules
+
+
 def test_registry_names_match_their_classes():
     assert list(METHODS)[:2] == ["quilting", "efros_leung"]
     for name in METHODS:

@@ -69,7 +69,7 @@ __all__ = ["WeiLevoy", "causal_offsets", "TSVQ"]  # TSVQ: from texsyn.ops.tsvq, 
 
 #: levels whose bank has at least this many rows are searched through a
 #: :class:`~texsyn.ops.search.BoundedNearestIndex` (the same rows as the plain product, proven)
-BOUNDED_SEARCH_ROWS = 2048
+BOUNDED_SEARCH_ROWS = 1024
 #: ... unless more than this share of its rows have another row at the same place (ties)
 TWINNED_ROWS = 0.01
 #: on a torus, the rows and columns around each wrap synthesised again with the full
@@ -95,6 +95,16 @@ def _gather(image: np.ndarray, rows: np.ndarray, cols: np.ndarray, offsets: np.n
     cc = (cols[:, None] + offsets[None, :, 1]) % w
     flat = image.reshape(h * w, -1)
     return np.take(flat, rr * w + cc, axis=0).reshape(len(rows), -1)
+
+
+def _squared_norms(bank: np.ndarray, rows: int = 1024) -> np.ndarray:
+    """``np.sum(bank * bank, axis=1)``, the same sums, a block of rows at a time (no temporary
+    as large as the bank: its fresh pages cost system time)."""
+    out = np.empty(len(bank))
+    for start in range(0, len(bank), rows):
+        block = bank[start : start + rows]
+        np.sum(block * block, axis=1, out=out[start : start + rows])
+    return out
 
 
 class WeiLevoy(TextureSynthesizer):
@@ -220,12 +230,16 @@ class WeiLevoy(TextureSynthesizer):
         self.banks_, self.norms_, self.trees_, self.indexes_, self.isolated_ = [], [], [], [], []
         for level, image in enumerate(self.pyramid_):
             rows, cols = np.divmod(np.arange(image.shape[0] * image.shape[1]), image.shape[1])
-            parts = [_gather(image, rows, cols, self.causal_)]
-            if level + 1 < self.levels:
-                parts.append(_gather(self.pyramid_[level + 1], rows // 2, cols // 2, self.parent_))
-            bank = np.ascontiguousarray(np.concatenate(parts, axis=1))
+            # the causal part, then the parent square, gathered in place (as the queries are)
+            causal = len(self.causal_) * image.shape[2]
+            parent = len(self.parent_) * image.shape[2] if level + 1 < self.levels else 0
+            bank = np.empty((len(rows), causal + parent))
+            gather_wrapped(np.ascontiguousarray(image), rows, cols, self.causal_, bank)
+            if parent:
+                coarser = np.ascontiguousarray(self.pyramid_[level + 1])
+                gather_wrapped(coarser, rows // 2, cols // 2, self.parent_, bank, causal)
             self.banks_.append(bank)
-            self.norms_.append(np.sum(bank * bank, axis=1))
+            self.norms_.append(_squared_norms(bank))
             self.trees_.append(TSVQ(bank, self.leaf_size, rng) if self.search == "tsvq" else None)
             index = isolated = None
             if self.search == "exact" and len(bank) >= BOUNDED_SEARCH_ROWS:
@@ -356,7 +370,9 @@ class WeiLevoy(TextureSynthesizer):
                 best = tree.nearest(q)
             elif index is not None:  # seeds: the continuations of the left and upper sources
                 left, up = src[ys, xs - 1], src[ys - 1, xs]
-                seeds = np.stack([left - left % ew + (left + 1) % ew, (up + ew) % (eh * ew)], axis=1)
+                seeds = np.empty((ys.size, 2), dtype=np.int64)
+                seeds[:, 0] = left - left % ew + (left + 1) % ew
+                seeds[:, 1] = (up + ew) % (eh * ew)
                 best = nearest_rows_bounded(q, bank, norms, index, seeds, isolated)
             else:
                 best = nearest_rows(q, bank, norms)

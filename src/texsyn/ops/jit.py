@@ -71,6 +71,7 @@ class LazyKernel:
     def _compile(self) -> Any:
         if self.parallel:
             _passive_openmp()
+        _preload_cython_blas()
         import numba
 
         source = self.py_func
@@ -95,6 +96,49 @@ class LazyKernel:
     def __repr__(self) -> str:
         state = "compiled" if self._compiled is not None else "not compiled yet"
         return f"<LazyKernel {self.py_func.__module__}.{self.py_func.__qualname__} ({state})>"
+
+
+_preload_lock = threading.Lock()
+
+
+def _preload_cython_blas() -> None:
+    """Load SciPy's ``scipy.linalg.cython_blas`` on its own, without the ``scipy.linalg`` package.
+
+    Numba's first compilation or cache load checks that BLAS is there by importing
+    ``scipy.linalg.cython_blas``, which imports the whole ``scipy.linalg`` package first (about
+    0.13 s of start-up, ``docs/performance.md``, "Start-up"), and later reads only that module's
+    function pointers (``importlib.import_module``). Loading the extension module under its
+    full name first makes that import a lookup. Nothing changes for a process that has
+    ``scipy.linalg`` already, or where the module cannot be found: numba then imports it itself.
+    """
+    import sys
+
+    name = "scipy.linalg.cython_blas"
+    with _preload_lock:
+        if name in sys.modules or "scipy.linalg" in sys.modules:
+            return
+        _load_alone(name)
+
+
+def _load_alone(name: str) -> None:
+    """Load the extension module ``name`` of SciPy's ``linalg`` without its package."""
+    import importlib.machinery
+    import importlib.util
+    import sys
+
+    try:
+        scipy_spec = importlib.util.find_spec("scipy")
+        if scipy_spec is None or not scipy_spec.submodule_search_locations:
+            return
+        places = [os.path.join(place, "linalg") for place in scipy_spec.submodule_search_locations]
+        spec = importlib.machinery.PathFinder.find_spec(name, places)
+        if spec is None or spec.loader is None:
+            return
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module
+        spec.loader.exec_module(module)
+    except Exception:  # pragma: no cover - numba imports it the usual way
+        sys.modules.pop(name, None)
 
 
 def _passive_openmp() -> None:

@@ -1076,12 +1076,13 @@ class BoundedNearestIndex:
         counts = np.empty((n, bands.shape[1]), dtype=np.int64)
         gamma_x = 1.01 * _gamma(d + 3, _U64)
         gamma_e = 1.01 * _gamma(self.basis.shape[1] + 3, _U64)
-        found = np.empty((n, self._parts() * self.capacity), dtype=np.int64)
+        n_parts = self._parts()
+        found = np.empty((n, n_parts * self.capacity), dtype=np.int64)
         for start in range(0, n, self.block):
             stop = min(n, start + self.block)
             self._search_block(
                 queries[start:stop], seeds[start:stop], bands[start:stop], gamma_x, gamma_e,
-                index[start:stop], distance[start:stop], counts[start:stop], found[start:stop],
+                index[start:stop], distance[start:stop], counts[start:stop], found[start:stop], n_parts,
             )  # fmt: skip
         if members:
             return index, distance, counts, found
@@ -1102,10 +1103,10 @@ class BoundedNearestIndex:
         distance: np.ndarray,
         counts: np.ndarray,
         members: np.ndarray,
+        n_parts: int,
     ) -> None:
-        """:meth:`query` of one block of queries, the bank cut into parts searched in parallel."""
+        """:meth:`query` of one block of queries, the bank cut into ``n_parts`` parts searched in parallel."""
         k, m = len(self), q.shape[0]
-        n_parts = self._parts()
         edges = [16 * (k * p // (16 * n_parts)) for p in range(n_parts)] + [k]
         centred = q - self.mean
         full = centred @ self.basis
