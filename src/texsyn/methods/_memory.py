@@ -109,10 +109,13 @@ def nonparametric_bytes(
     up to 2048, ``max(128, 2^22 / K)`` rows or about a pass, whichever is shorter;
     ``docs/methods/efros_leung.md``).
 
-    ``screened``: the counts measured for a sampler that screens (a plain exemplar, as
-    Efros-Leung's; ``docs/memory.md``): its construction holds the windows once (``8 K w^2
-    c``) and the float32 bounds' construction (``16 K n``), and its searches hold either the
-    chunks of bounds or a batch's distances, the larger of the two, never both.
+    ``screened``: the construction of a sampler that screens (a plain exemplar, as
+    Efros-Leung's) holds the windows once (``8 K w^2 c``) and the float32 bounds'
+    construction (``16 K n``), measured (``docs/memory.md``, "Second round"), instead of
+    ``24 K w^2 c``. Its growth counts both the chunks of bounds and a batch's full search:
+    a batch whose screen is not sure is searched whole while the chunks are kept
+    (:meth:`~texsyn.ops.nonparametric.NonParametricSampler.match_screened`); runs rarely
+    reach it, so a typical peak lies below the estimate by about that batch's search.
     """
     k = float(max(1, (h - window + 1) * (w - window + 1)))
     dim = float(window * window * c)
@@ -132,7 +135,7 @@ def nonparametric_bytes(
     chunk = float(min(max(128, (1 << 22) // int(k)), oh + ow))  # at most about a pass
     columns = -(-k // 2048) * 2048  # the bounds and their minima by blocks of 64
     bounds = 2.0 * chunk * (4.0625 * columns + 16.0 * screen + 8.0 * dim)
-    grow += (max(searches, bounds) if screened else searches + bounds) + 24.0 * k
+    grow += searches + bounds + 24.0 * k
     return kept, grow
 
 
