@@ -120,7 +120,10 @@ class HeegerBergen(TextureSynthesizer):
         scales = sum(4.0**-j for j in range(self.n_scales))
         terms["subbands"] = coefficients
         terms["spectra workspace"] = canvas * (24.0 * c * (scales + 4.0**-self.n_scales) + 8.0 * scales)
-        terms["image and sort keys"] = 16.0 * c * canvas
+        # below the workspace's size the reconstruction is a new image, made while the last
+        # one is still referenced (:meth:`_step`)
+        large = 16.0 * c * ch * (cw // 2 + 1) >= LARGE_SCRATCH_BYTES
+        terms["images and sort keys"] = (16.0 if large else 24.0) * c * canvas
         terms["output image"] = output_bytes(c, output_shape)
         return terms
 
