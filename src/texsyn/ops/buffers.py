@@ -43,7 +43,7 @@ def scratch_empty(shape: tuple[int, ...], dtype=np.float64) -> np.ndarray:
     """
     dtype = np.dtype(dtype)
     nbytes = math.prod(shape) * dtype.itemsize
-    if nbytes < LARGE_SCRATCH_BYTES:
+    if nbytes < LARGE_SCRATCH_BYTES or not hasattr(mmap, "MAP_PRIVATE"):  # (Windows: no flags)
         return np.empty(shape, dtype=dtype)
     pages = mmap.mmap(-1, nbytes, flags=mmap.MAP_PRIVATE)  # anonymous, private (not shared memory)
     return np.frombuffer(pages, dtype=dtype).reshape(shape)
