@@ -95,7 +95,7 @@ def fft_search_terms(
 
 
 def nonparametric_bytes(
-    h: int, w: int, c: int, window: int, output_shape: tuple[int, int] | None
+    h: int, w: int, c: int, window: int, output_shape: tuple[int, int] | None, *, screened: bool = False
 ) -> tuple[float, float]:
     """``(kept, transient)`` bytes of :class:`~texsyn.ops.nonparametric.NonParametricSampler`.
 
@@ -108,6 +108,14 @@ def nonparametric_bytes(
     chunks of float32 lower bounds (``2 x 4 K'`` bytes a row, ``K'`` the window count rounded
     up to 2048, ``max(128, 2^22 / K)`` rows or about a pass, whichever is shorter;
     ``docs/methods/efros_leung.md``).
+
+    ``screened``: the construction of a sampler that screens (a plain exemplar, as
+    Efros-Leung's) holds the windows once (``8 K w^2 c``) and the float32 bounds'
+    construction (``16 K n``), measured (``docs/memory.md``, "Second round"), instead of
+    ``24 K w^2 c``. Its growth counts both the chunks of bounds and a batch's full search:
+    a batch whose screen is not sure is searched whole while the chunks are kept
+    (:meth:`~texsyn.ops.nonparametric.NonParametricSampler.match_screened`); runs rarely
+    reach it, so a typical peak lies below the estimate by about that batch's search.
     """
     k = float(max(1, (h - window + 1) * (w - window + 1)))
     dim = float(window * window * c)
@@ -116,17 +124,18 @@ def nonparametric_bytes(
     screen = (disc - 1) * (1 + min(c, 2))
     kept = 16.0 * k * dim + 16.0 * k + 8.0 * k * screen + 16.0 * float(h * w * c)
     if output_shape is None:
-        return kept, 24.0 * k * dim
+        return kept, (8.0 * k * dim + 16.0 * k * screen) if screened else 24.0 * k * dim
     oh, ow = output_shape[:2]
     r = window // 2
     padded = float(oh + 2 * r) * float(ow + 2 * r)
     cap = max(8, min(256, (1 << 23) // int(k)))
     batch = float(min(cap, max(8, (oh + ow) // (r + 1))))
     grow = padded * (8.0 * c + 33.0) + 16.0 * float(oh) * float(ow) + 64.0 * (oh + ow + 8 * r)
-    grow += batch * (48.0 * dim + 16.0 * k + 24.0 * window * window)
+    searches = batch * (48.0 * dim + 16.0 * k + 24.0 * window * window)
     chunk = float(min(max(128, (1 << 22) // int(k)), oh + ow))  # at most about a pass
     columns = -(-k // 2048) * 2048  # the bounds and their minima by blocks of 64
-    grow += 2.0 * chunk * (4.0625 * columns + 16.0 * screen + 8.0 * dim) + 24.0 * k
+    bounds = 2.0 * chunk * (4.0625 * columns + 16.0 * screen + 8.0 * dim)
+    grow += searches + bounds + 24.0 * k
     return kept, grow
 
 

@@ -16,7 +16,7 @@ from ..ops.nonparametric import NonParametricSampler
 from ..ops.patches import as_channels
 from ..ops.progress import Progress, Reporter
 from ._base import SynthesisResult, TextureSynthesizer
-from ._memory import nonparametric_bytes, output_bytes, shape_dims
+from ._memory import CALIBRATED_MARGIN, nonparametric_bytes, output_bytes, shape_dims
 
 __all__ = ["EfrosLeung"]
 
@@ -75,6 +75,9 @@ class EfrosLeung(TextureSynthesizer):
     """
 
     name = "efros_leung"
+    #: the exact search's terms are calibrated (docs/memory.md); the approximate search's are
+    #: not, and keep the default 1.25 (:meth:`_approximate_memory`)
+    memory_margin = CALIBRATED_MARGIN
     summary = "Efros-Leung pixel-by-pixel non-parametric sampling"
     reference = "Efros, Leung, ICCV 1999"
     has_source_map = True
@@ -120,9 +123,10 @@ class EfrosLeung(TextureSynthesizer):
         """Every exemplar window (squared and scaled, ``16 K w^2 C`` bytes); the canvas and one
         batch of searches against all windows (``docs/memory.md``)."""
         h, w, c = shape_dims(exemplar_shape)
-        if self.search == "approximate":
-            return self._approximate_memory(h, w, c, output_shape)
-        kept, transient = nonparametric_bytes(h, w, c, self.window_size, output_shape)
+        if self.search == "approximate":  # uncalibrated: the default margin of 1.25
+            terms = self._approximate_memory(h, w, c, output_shape)
+            return {key: value * 1.25 / CALIBRATED_MARGIN for key, value in terms.items()}
+        kept, transient = nonparametric_bytes(h, w, c, self.window_size, output_shape, screened=True)
         terms = {"exemplar windows": 8.0 * h * w * c + kept}
         if output_shape is None:
             terms["window extraction"] = transient

@@ -51,7 +51,7 @@ from ..ops.patches import as_channels
 from ..ops.progress import Progress, Reporter
 from ..transforms.complex_steerable import ComplexSteerablePyramid
 from ._base import TextureSynthesizer
-from ._memory import output_bytes, shape_dims
+from ._memory import CALIBRATED_MARGIN, output_bytes, shape_dims
 
 __all__ = ["PortillaSimoncelli", "project_statistics", "projection_step", "ps_synthesis"]
 
@@ -326,25 +326,27 @@ class PortillaSimoncelli(TextureSynthesizer):
         )
 
     # ------------------------------------------------------------------ memory
+    memory_margin = CALIBRATED_MARGIN
+
     def memory_terms(self, exemplar_shape, output_shape=None) -> dict[str, float]:
         """Complex pyramid, its magnitudes and parents, per channel (``docs/memory.md``).
 
-        An empirical model of the analysis and of one iteration of the projections: about
-        ``110 + 150 n_orientations`` bytes per pixel and channel, nearly independent of
-        ``n_scales`` (the coarser scales add a third), measured with ``tracemalloc``.
+        An empirical model of the analysis and of one iteration of the projections, fitted
+        to the measured peaks (resident growth and ``tracemalloc``, 128x128 exemplars, grey
+        and colour, 256x256 and 512x512 outputs; ``benchmarks/memory.md``): about
+        ``500 + 380 C`` bytes per exemplar pixel and ``220 + 300 C`` per output pixel with
+        the default four orientations (``C`` the channels synthesised together).
         """
         h, w, c = shape_dims(exemplar_shape)
         k = float(h * w)
         channels = 3 if c == 3 and self.colour != "grey" else 1
         terms = {"exemplar": 16.0 * k * c}
         if output_shape is None:
-            terms["analysis of the exemplar"] = k * (150.0 + channels * (100.0 + 140.0 * self.n_orientations))
+            terms["analysis of the exemplar"] = k * (500.0 + channels * (60.0 + 80.0 * self.n_orientations))
             return terms
         ch, cw = self._canvas(output_shape)
         canvas = float(ch) * float(cw)
-        terms["pyramids of one iteration"] = canvas * (
-            100.0 + channels * (110.0 + 150.0 * self.n_orientations)
-        )
+        terms["pyramids of one iteration"] = canvas * (220.0 + channels * (60.0 + 60.0 * self.n_orientations))
         terms["output image"] = output_bytes(c, output_shape)
         return terms
 

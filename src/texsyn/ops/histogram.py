@@ -14,6 +14,7 @@ import sys
 
 import numpy as np
 
+from .buffers import scratch_empty
 from .color import ColorPCA
 from .jit import jit
 from .linalg import parallel_map, worker_count
@@ -92,7 +93,7 @@ def hist_target_rows(n: int, references_sorted: np.ndarray) -> np.ndarray:
     cums[:, 0] = 0.0
     np.cumsum(ys, axis=1, out=cums[:, 1:])  # each row's sequential sum, as np.cumsum of the row
     cums /= ny
-    out = np.empty((rows, n))
+    out = scratch_empty((rows, n))  # kept by an iterative method: ordinary pages (ops.buffers)
     chunks = (
         np.array_split(np.arange(rows), min(rows, worker_count()))
         if rows * n >= 1 << 20
@@ -312,7 +313,7 @@ class HistogramMatcher:
         if method == "ot" and len(sizes) == 1 and 0 not in sizes:  # one row per channel, compiled
             self._stacked = hist_target_rows(n_values, np.stack([np.ravel(v) for v in sorted_values]))
         else:
-            self._stacked = np.empty((len(sorted_values), n_values))
+            self._stacked = scratch_empty((len(sorted_values), n_values))
             for c, values in enumerate(sorted_values):
                 self._stacked[c] = hist_target(n_values, values, method=method, presorted=True)
         self.targets = list(self._stacked)

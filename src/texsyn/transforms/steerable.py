@@ -14,6 +14,11 @@ image size (odd sizes included) and no power-of-two restriction is needed.
 The oriented bands here are real (the ``(-i)^(K-1) cos^(K-1)`` angular window); the complex
 (analytic) bands of Portilla-Simoncelli are obtained by doubling the window on one half-plane
 (:mod:`texsyn.transforms.complex_steerable`).
+
+Why this module is long: besides the transform itself it holds its workspace
+(:class:`PyramidWorkspace`) and the two passes of each 2-D transform written into given
+arrays, which an iterative method (Heeger-Bergen) needs so that no large array is made per
+iteration (issue 20); they belong with the transform whose bytes they must reproduce.
 """
 
 from __future__ import annotations
@@ -24,10 +29,12 @@ from math import factorial
 
 import numpy as np
 
+from ..ops.buffers import scratch_empty
 from .coefficients import Coefficients
 
 __all__ = [
     "Pyramid",
+    "PyramidWorkspace",
     "SteerablePyramid",
     "crop_indices",
     "max_scales",
@@ -85,6 +92,33 @@ class Pyramid(Coefficients):
         else:
             level, band = key
             self.bands[level][band] = value
+
+
+@dataclass
+class PyramidWorkspace:
+    """Scratch spectra of :meth:`SteerablePyramid.forward` and :meth:`SteerablePyramid.inverse`,
+    made once (:meth:`SteerablePyramid.workspace`) and passed to every transform of an
+    iterative method.
+
+    Arrays of 32 MiB and more (a 2048x2048 colour half spectrum is 100 MB) are mapped afresh
+    by the allocator at every allocation and the kernel clears their pages: made once, they
+    are not (issue 20; ``docs/methods/heeger_bergen.md``, "Performance"). Which arrays hold
+    the scratch does not change any value.
+
+    Attributes
+    ----------
+    channels : int or None
+        The images' channels (``None``: 2-D images).
+    spectra : list of tuple of ndarray
+        Three complex half spectra of every level ``0 ... n_scales``, ``(C, h, w // 2 + 1)``
+        (``(h, w // 2 + 1)`` without channels).
+    conjugate : list of ndarray
+        One complex array of every band level's filter shape, for a filter's conjugate.
+    """
+
+    channels: int | None
+    spectra: list[tuple[np.ndarray, np.ndarray, np.ndarray]]
+    conjugate: list[np.ndarray]
 
 
 def radial_lowpass(r: np.ndarray) -> np.ndarray:
@@ -222,40 +256,86 @@ class SteerablePyramid:
             return self.sizes[-1]
         return self.sizes[key[0]]
 
+    def workspace(self, channels: int | None = None) -> PyramidWorkspace:
+        """Scratch arrays for the transforms of ``(H, W, channels)`` images (``(H, W)`` ones
+        when ``channels`` is ``None``): :class:`PyramidWorkspace`."""
+        lead = () if channels is None else (int(channels),)
+
+        def half(size: tuple[int, int]) -> np.ndarray:
+            return scratch_empty(lead + (size[0], size[1] // 2 + 1), dtype=complex)
+
+        spectra = [(half(size), half(size), half(size)) for size in self.sizes]
+        conjugate = [scratch_empty(oriented[0].shape, dtype=complex) for _, oriented in self._filters]
+        return PyramidWorkspace(
+            channels=None if channels is None else int(channels), spectra=spectra, conjugate=conjugate
+        )
+
+    def _coefficients(self, channels: int | None) -> Pyramid:
+        """A :class:`Pyramid` of uninitialised coefficients (``(h, w, C)`` views of ``(C, h, w)``
+        planes, :func:`texsyn.ops.buffers.scratch_empty`), for :meth:`forward` to write into."""
+        lead = () if channels is None else (channels,)
+        nd = len(lead) + 2
+
+        def band(size: tuple[int, int]) -> np.ndarray:
+            return _channels_last(scratch_empty(lead + size), nd)
+
+        bands = [[band(size) for _ in range(self.n_orientations)] for size in self.sizes[:-1]]
+        return Pyramid(highpass=band(self.shape), bands=bands, lowpass=band(self.sizes[-1]))
+
+    def _scratch(self, workspace: PyramidWorkspace | None, channels: int | None) -> PyramidWorkspace:
+        """``workspace``, checked against images of ``channels`` channels, or a fresh one."""
+        if workspace is None:
+            return self.workspace(channels)
+        if workspace.channels != channels or workspace.spectra[0][0].shape[-2:] != (
+            self.shape[0],
+            self.shape[1] // 2 + 1,
+        ):
+            raise ValueError(f"the workspace was made for other images than {self.shape + (channels,)}")
+        return workspace
+
     def _check(self, image: np.ndarray) -> np.ndarray:
         img = np.asarray(image, dtype=np.float64)
         if img.shape[:2] != self.shape:
             raise ValueError(f"image shape {img.shape[:2]} does not match the pyramid's {self.shape}")
         return img
 
-    def forward(self, image: np.ndarray, *, out: Pyramid | None = None) -> Pyramid:
+    def forward(
+        self, image: np.ndarray, *, out: Pyramid | None = None, workspace: PyramidWorkspace | None = None
+    ) -> Pyramid:
         """Analyse an image into a :class:`Pyramid`.
 
         ``out``, a :class:`Pyramid` that ``forward`` gave earlier for an image of the same
         shape and that is no longer needed, receives the coefficients in its arrays (an
         iterative method reuses them instead of faulting in fresh pages: arrays of 32 MiB and
-        more are mapped afresh at every allocation; issue 20). Same bytes either way.
+        more are mapped afresh at every allocation; issue 20), and ``workspace``
+        (:meth:`workspace`) holds the spectra (and, without ``out``, gives the coefficients
+        their arrays, :func:`texsyn.ops.buffers.scratch_empty`). Same bytes either way.
 
         The channels of an ``(H, W, C)`` image are transformed as contiguous ``(C, H, W)``
         planes (the coefficients are ``(h, w, C)`` views of such planes): the transforms
         along the columns then read contiguous lines instead of lines strided by ``C``
         values, which at 2048x2048 missed the caches and grew faster than the pixel count
-        (issue 20). Each line's transform is the same, so the bytes are too.
+        (issue 20). Each line's transform is the same, so the bytes are too. The 2-D
+        transforms are ``rfft2``'s and ``irfft2``'s two passes (:func:`_rfft2`,
+        :func:`_irfft2`), written into the workspace.
         """
         img = self._check(image)
+        channels = img.shape[2] if img.ndim == 3 else None
+        ws = self._scratch(workspace, channels)
+        if out is None and workspace is not None:  # the coefficients an iterative method reuses
+            out = self._coefficients(channels)
         planes = np.ascontiguousarray(np.moveaxis(img, -1, 0)) if img.ndim == 3 else img
-        spec = np.fft.rfft2(planes)
-        product = spec * self._hi0  # one buffer for a level's filtered spectra (fewer fresh pages)
-        half = np.empty_like(product)  # and one for their column transforms
+        spec, product, half = ws.spectra[0]
+        _rfft2(planes, product, spec)
         nd = img.ndim
+        np.multiply(spec, self._hi0, out=product)
         highpass = _irfft2(product, self.shape, half, None if out is None else out.highpass, nd)
         low = np.multiply(spec, self._lo0, out=spec)
         bands = []
         for level in range(self.n_scales):
             size = self.sizes[level]
             lo, oriented = self._filters[level]
-            if level:
-                product, half = np.empty_like(low), np.empty_like(low)
+            _, product, half = ws.spectra[level]
             previous = [None] * len(oriented) if out is None else out.bands[level]
             bands.append(
                 [
@@ -263,45 +343,72 @@ class SteerablePyramid:
                     for g, reuse in zip(oriented, previous)
                 ]
             )
-            low = self._down(np.multiply(low, lo, out=low), size, self.sizes[level + 1])
-        lowpass = np.fft.irfft2(low, s=self.sizes[-1])
-        return Pyramid(highpass=highpass, bands=bands, lowpass=_channels_last(lowpass, nd))
+            coarse = ws.spectra[level + 1][0]
+            low = self._down(np.multiply(low, lo, out=low), size, self.sizes[level + 1], product, coarse)
+        _, _, half = ws.spectra[-1]
+        lowpass = _irfft2(low, self.sizes[-1], half, None if out is None else out.lowpass, nd)
+        return Pyramid(highpass=highpass, bands=bands, lowpass=lowpass)
 
-    def inverse(self, pyramid: Pyramid) -> np.ndarray:
+    def inverse(
+        self, pyramid: Pyramid, *, workspace: PyramidWorkspace | None = None, out: np.ndarray | None = None
+    ) -> np.ndarray:
         """Synthesise the image from its coefficients (adjoint of :meth:`forward`; channels as
-        ``(C, H, W)`` planes, as there)."""
+        ``(C, H, W)`` planes, as there).
+
+        ``workspace`` (:meth:`workspace`) holds the spectra; the image is written into
+        ``out`` when given (an ``(H, W, C)`` view of ``(C, H, W)`` planes, as the images
+        this method returns, that is no longer needed). Same bytes either way.
+        """
         if pyramid.lowpass is None:
             raise ValueError("the pyramid has no low-pass residual")
-        nd = np.ndim(pyramid.lowpass)
-        low = np.fft.rfft2(_channels_first(pyramid.lowpass, nd))
+        lowpass = np.asarray(pyramid.lowpass)
+        nd = lowpass.ndim
+        ws = self._scratch(workspace, lowpass.shape[2] if nd == 3 else None)
+        low, rows, _ = ws.spectra[-1]
+        _rfft2(_channels_first(lowpass, nd), rows, low)
         for level in reversed(range(self.n_scales)):
             size = self.sizes[level]
             lo, oriented = self._filters[level]
-            low = self._up(low, self.sizes[level + 1], size)
+            fine, rows, spectrum = ws.spectra[level]
+            low = self._up(low, self.sizes[level + 1], size, fine)
             low *= lo
-            conjugate = np.empty_like(oriented[0])
-            rows, spectrum = np.empty_like(low), np.empty_like(low)  # the bands' transforms
+            conjugate = ws.conjugate[level]
             for g, band in zip(oriented, pyramid.bands[level]):
                 _rfft2(_channels_first(band, nd), rows, spectrum)
                 low += np.multiply(spectrum, np.conjugate(g, out=conjugate), out=spectrum)
         spec = np.multiply(low, self._lo0, out=low)
         spectrum = _rfft2(_channels_first(pyramid.highpass, nd), rows, spectrum)
         spec += np.multiply(spectrum, self._hi0, out=spectrum)
-        return _channels_last(np.fft.irfft2(spec, s=self.shape), nd)
+        reuse = out if out is not None and _writable_planes(out, nd, self.shape) else None
+        return _irfft2(spec, self.shape, rows, reuse, nd)
 
     @staticmethod
-    def _down(spec: np.ndarray, fine: tuple[int, int], coarse: tuple[int, int]) -> np.ndarray:
+    def _down(
+        spec: np.ndarray, fine: tuple[int, int], coarse: tuple[int, int], scratch: np.ndarray, out: np.ndarray
+    ) -> np.ndarray:
+        """The spectrum of size ``coarse`` cropped from ``spec``, scaled, in ``out``
+        (``spec[..., rows, :][..., cols] * scale``; ``scratch``, as large as ``spec``, holds
+        the rows)."""
         rows = crop_indices(fine[0], coarse[0])
         cols = np.arange(coarse[1] // 2 + 1)
         scale = (coarse[0] * coarse[1]) / (fine[0] * fine[1])
-        return spec[..., rows, :][..., cols] * scale
+        shape = spec.shape[:-2] + (rows.size, spec.shape[-1])
+        cropped = np.take(
+            spec, rows, axis=-2, mode="clip", out=scratch.reshape(-1)[: math.prod(shape)].reshape(shape)
+        )
+        np.take(cropped, cols, axis=-1, mode="clip", out=out)  # in range: no buffered copy
+        out *= scale
+        return out
 
     @staticmethod
-    def _up(spec: np.ndarray, coarse: tuple[int, int], fine: tuple[int, int]) -> np.ndarray:
+    def _up(spec: np.ndarray, coarse: tuple[int, int], fine: tuple[int, int], out: np.ndarray) -> np.ndarray:
+        """The spectrum of size ``fine`` that zero-pads ``spec``, scaled, in ``out`` (``spec``
+        is scaled in place)."""
         rows = crop_indices(fine[0], coarse[0])
-        out = np.zeros(spec.shape[:-2] + (fine[0], fine[1] // 2 + 1), dtype=complex)
+        out.fill(0)
         scale = (fine[0] * fine[1]) / (coarse[0] * coarse[1])
-        out[..., rows, : coarse[1] // 2 + 1] = spec * scale
+        spec *= scale
+        out[..., rows, : coarse[1] // 2 + 1] = spec
         return out
 
 
@@ -321,6 +428,13 @@ def _irfft2(
     np.fft.ifft(spectrum, n=size[0], axis=-2, out=half)
     planes = None if reuse is None else _channels_first(reuse, ndim)
     return _channels_last(np.fft.irfft(half, n=size[1], axis=-1, out=planes), ndim)
+
+
+def _writable_planes(image: np.ndarray, ndim: int, shape: tuple[int, int]) -> bool:
+    """Whether ``image`` is a float64 ``(H, W, C)`` view of C-contiguous ``(C, H, W)`` planes
+    (a C-contiguous ``(H, W)`` array without channels) of size ``shape``."""
+    planes = _channels_first(image, ndim)
+    return planes.dtype == np.float64 and planes.flags.c_contiguous and planes.shape[-2:] == shape
 
 
 def _channels_last(planes: np.ndarray, ndim: int) -> np.ndarray:
