@@ -28,8 +28,8 @@ import functools
 from collections.abc import Callable
 
 import numpy as np
-import scipy.fft as sfft
 
+from ..ops import fft as pocketfft
 from ..ops.linalg import worker_count
 from .steerable import crop_indices, oriented_windows, pyramid_sizes, radial_lowpass
 
@@ -188,22 +188,22 @@ class ComplexSteerablePyramid:
         """
         x = np.asarray(x)
         dtype = np.result_type(self.real_dtype, np.complex64) if np.iscomplexobj(x) else self.real_dtype
-        return sfft.fft2(x.astype(dtype, copy=False), workers=fft_workers(x.size))
+        return pocketfft.fft2(x.astype(dtype, copy=False), workers=fft_workers(x.size))
 
     def rfft(self, x: np.ndarray) -> np.ndarray:
         """``rfft2`` of real arrays in the pyramid's precision: the columns ``0 .. w // 2`` of
         :meth:`fft` (pocketfft computes the full transform of real data as this half, then
         mirrors it: the same bytes), in half the time."""
         x = np.asarray(x)
-        return sfft.rfft2(x.astype(self.real_dtype, copy=False), workers=fft_workers(x.size))
+        return pocketfft.rfft2(x.astype(self.real_dtype, copy=False), workers=fft_workers(x.size))
 
     def irfft(self, half: np.ndarray, level: int = 0) -> np.ndarray:
         """The real image of the size of ``level`` from its half spectrum (``irfft2``)."""
-        return sfft.irfft2(half, s=self.sizes[level], workers=fft_workers(2 * half.size))
+        return pocketfft.irfft2(half, s=self.sizes[level], workers=fft_workers(2 * half.size))
 
     def ifft(self, x: np.ndarray) -> np.ndarray:
         """Inverse 2-D FFT over the last two axes (complex result; threads as :meth:`fft`)."""
-        return sfft.ifft2(x, workers=fft_workers(x.size))
+        return pocketfft.ifft2(x, workers=fft_workers(x.size))
 
     @staticmethod
     def _polar(shape):
@@ -255,7 +255,7 @@ class ComplexSteerablePyramid:
             np.multiply(spec[..., coarse_r, :], scale, out=columns[..., fine_r, :wc])
             columns[..., fine_r.stop : next_r.start, :wc] = 0.0  # the zero padding between the runs
         columns[..., : rows[0][0].start, :wc] = 0.0
-        columns = sfft.ifft(columns, axis=-2, norm="forward", overwrite_x=True, workers=workers)
+        columns = pocketfft.ifft(columns, axis=-2, norm="forward", overwrite_x=True, workers=workers)
         # scale by 1 / (h w) as pocketfft does (real and imaginary parts by a real factor) while
         # copying into the full array, whose other columns are the zero column's transform
         real = columns.real.dtype
@@ -272,7 +272,7 @@ class ComplexSteerablePyramid:
             )
             previous = fine_c.stop
         out[..., previous:] = columns[..., wc : wc + 1]
-        return sfft.ifft(out, axis=-1, norm="forward", overwrite_x=True, workers=workers)
+        return pocketfft.ifft(out, axis=-1, norm="forward", overwrite_x=True, workers=workers)
 
     def expand(self, image: np.ndarray, level: int) -> np.ndarray:
         """Interpolate ``(..., h, w)`` arrays of level ``level + 1`` to the size of ``level``."""
@@ -322,7 +322,7 @@ class ComplexSteerablePyramid:
         c, k = low.shape[0], filters.shape[0]
         out = np.empty((c, k) + low.shape[1:], dtype=np.result_type(low.dtype, filters.dtype))
         np.multiply(low[:, None], filters, out=out)
-        return sfft.ifft2(out, overwrite_x=True, workers=fft_workers(out.size))  # in place
+        return pocketfft.ifft2(out, overwrite_x=True, workers=fft_workers(out.size))  # in place
 
     def lowpass_image(self, residual: np.ndarray) -> np.ndarray:
         """The coarsest partially reconstructed image: the low-pass residual filtered by ``L(r/2)``."""
