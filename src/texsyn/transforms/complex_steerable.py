@@ -65,8 +65,16 @@ def _runs(indices: np.ndarray) -> list[tuple[slice, slice]]:
 
 def inverse_norm(n: int, dtype) -> np.ndarray:
     """pocketfft's ``1 / n`` normalisation factor, a 0-d array of ``dtype``: computed in long
-    double, then rounded once (``norm_fct`` of scipy's ``pypocketfft``)."""
-    return np.asarray(np.longdouble(1) / np.longdouble(n)).astype(dtype)
+    double, then rounded once (``norm_fct`` of scipy's ``pypocketfft``); read-only, computed
+    once per size and type (the synthesis asks for it 25 times an iteration)."""
+    return _inverse_norm(int(n), np.dtype(dtype))
+
+
+@functools.cache
+def _inverse_norm(n: int, dtype: np.dtype) -> np.ndarray:
+    factor = np.asarray(np.longdouble(1) / np.longdouble(n)).astype(dtype)
+    factor.flags.writeable = False
+    return factor
 
 
 #: bands of this many pixels or more are processed one at a time
