@@ -472,6 +472,11 @@ def test_the_filters_made_in_row_blocks_are_the_whole_grids(single, workers, mon
         for name, value in expected.items():
             made = getattr(pyramid, name)[level]
             assert made.dtype == value.dtype and made.tobytes() == value.tobytes(), (name, level)
+        if level == 0:
+            lo0 = radial_lowpass(r / 2.0)
+            hi0 = np.sqrt(np.maximum(1.0 - lo0**2, 0.0))
+            assert pyramid.lo0.tobytes() == lo0.astype(rd).tobytes()
+            assert pyramid.hi0.tobytes() == hi0.astype(rd).tobytes()
 
 
 @pytest.mark.parametrize("shape", [(64, 64), (45, 70), (131, 262)])

@@ -160,17 +160,19 @@ class ComplexSteerablePyramid:
                 f"scales; need at least {2 ** (self.n_scales + 1)} pixels per side"
             )
         self.sizes = pyramid_sizes(self.shape, self.n_scales)
-        r0, _ = self._polar(self.shape)
-        self.lo0 = radial_lowpass(r0 / 2.0)
-        self.hi0 = np.sqrt(np.maximum(1.0 - self.lo0**2, 0.0))
+        self.lo0 = np.empty(self.shape)  # radial_lowpass(r / 2) on the finest grid, filled below
+        self.hi0 = np.empty(self.shape)
         self.lo: list[np.ndarray] = []
         self.real_filters: list[np.ndarray] = []
         self.conj_real_filters: list[np.ndarray] = []  # np.conj(real_filters[s]), for reconstruct_level
         self.analytic_filters: list[np.ndarray] = []
         self.half_planes: list[np.ndarray] = []
         rd, cd = self.real_dtype, np.result_type(self.real_dtype, np.complex64)
-        for size in self.sizes[: self.n_scales]:
-            r, theta = self._polar(size)
+        for level, size in enumerate(self.sizes[: self.n_scales]):
+            freqs = (
+                2 * np.pi * np.fft.fftfreq(size[0])[:, None],
+                2 * np.pi * np.fft.fftfreq(size[1])[None, :],
+            )
             filters = (
                 np.empty(size, dtype=rd),  # lo
                 np.empty((k,) + size, dtype=cd),  # real_filters
@@ -179,12 +181,17 @@ class ComplexSteerablePyramid:
                 np.empty((k,) + size, dtype=rd),  # half_planes
             )
 
-            def fill(rows: slice, r=r, theta=theta, filters=filters) -> None:
+            def fill(rows: slice, level=level, freqs=freqs, filters=filters) -> None:
                 lo_out, reals_out, conj_out, analytic_out, halves_out = filters
-                lo = radial_lowpass(r[rows])
-                reals = oriented_windows(theta[rows], np.sqrt(np.maximum(1.0 - lo**2, 0.0)), k)
+                fy, fx = freqs[0][rows], freqs[1]
+                r, theta = np.hypot(fx, fy), np.arctan2(fy, fx)  # _polar's, on these rows
+                if level == 0:
+                    self.lo0[rows] = lo0 = radial_lowpass(r / 2.0)
+                    self.hi0[rows] = np.sqrt(np.maximum(1.0 - lo0**2, 0.0))
+                lo = radial_lowpass(r)
+                reals = oriented_windows(theta, np.sqrt(np.maximum(1.0 - lo**2, 0.0)), k)
                 # analytic bands: the half plane each orientation points to, doubled
-                c = np.cos(theta[None, rows] - (np.pi * np.arange(k) / k)[:, None, None])
+                c = np.cos(theta[None] - (np.pi * np.arange(k) / k)[:, None, None])
                 halves = np.where(c > 1e-12, 2.0, np.where(c < -1e-12, 0.0, 1.0))
                 if rows.start == 0:
                     halves[:, 0, 0] = 1.0
@@ -204,6 +211,10 @@ class ComplexSteerablePyramid:
                 filters,
             ):
                 filter_list.append(values)
+        if not self.n_scales:  # no level filled them
+            r0, _ = self._polar(self.shape)
+            self.lo0 = radial_lowpass(r0 / 2.0)
+            self.hi0 = np.sqrt(np.maximum(1.0 - self.lo0**2, 0.0))
         self.lo0 = self.lo0.astype(self.real_dtype)
         self.hi0 = self.hi0.astype(self.real_dtype)
         # L(r/2) at every level's resolution: the low-pass that the partially reconstructed
