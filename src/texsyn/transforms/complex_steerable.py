@@ -203,8 +203,8 @@ class ComplexSteerablePyramid:
 
             # pointwise functions of the frequency, so blocks of rows give the numbers of the
             # whole grid; the blocks' powers and cosines are long NumPy calls that release the
-            # GIL, shared among texsyn's threads (issue 20: 256x256, 33 -> 23 ms on two cores;
-            # 2048x2048, whose whole-grid temporaries page-faulted, 3.4-5.9 -> 1.3 s)
+            # GIL, shared among texsyn's threads (issue 20: 256x256, 33 -> 21 ms on two cores;
+            # 2048x2048, whose whole-grid temporaries page-faulted, 3.4-6.1 -> 1.2-1.5 s)
             parallel_map(fill, _row_blocks(size))
             for filter_list, values in zip(
                 (self.lo, self.real_filters, self.conj_real_filters, self.analytic_filters, self.half_planes),
