@@ -25,9 +25,10 @@ import texsyn
 from texsyn.methods.portilla_simoncelli import project_statistics
 from texsyn.models import portilla_moments as moments
 from texsyn.models import portilla_projections as projections
+from texsyn.ops import linalg
 from texsyn.transforms import complex_steerable
 from texsyn.transforms.complex_steerable import ComplexSteerablePyramid
-from texsyn.transforms.steerable import crop_indices
+from texsyn.transforms.steerable import crop_indices, oriented_windows, radial_lowpass
 
 # --------------------------------------------------------------------------- reference loop
 # The synthesis iteration of texsyn 0.x before issue 20, function by function.
@@ -442,6 +443,40 @@ def test_the_step_solver_gives_numpy_polynomials_bits():
         assert np.asarray(fast).tobytes() == np.asarray(plain).tobytes()
         assert np.array(interval).tobytes() == np.array(_monotone_interval(num, den, power)).tobytes()
     assert cases > 500
+
+
+@pytest.mark.parametrize("single", [True, False])
+@pytest.mark.parametrize("workers", [1, 2])
+def test_the_filters_made_in_row_blocks_are_the_whole_grids(single, workers, monkeypatch):
+    # the pyramid computes its filters in blocks of rows on texsyn's threads: odd sizes,
+    # blocks of a few rows (several per level), the bytes of the formulas on the whole grid
+    monkeypatch.setattr(linalg, "worker_count", lambda: workers)
+    monkeypatch.setattr(complex_steerable, "_FILTER_BLOCK", 1 << 8)
+    k = 3
+    pyramid = ComplexSteerablePyramid((45, 70), 3, k, single=single)
+    rd, cd = pyramid.real_dtype, np.result_type(pyramid.real_dtype, np.complex64)
+    for level, size in enumerate(pyramid.sizes[:-1]):
+        r, theta = ComplexSteerablePyramid._polar(size)
+        lo = radial_lowpass(r)
+        reals = oriented_windows(theta, np.sqrt(np.maximum(1.0 - lo**2, 0.0)), k)
+        c = np.cos(theta[None] - (np.pi * np.arange(k) / k)[:, None, None])
+        halves = np.where(c > 1e-12, 2.0, np.where(c < -1e-12, 0.0, 1.0))
+        halves[:, 0, 0] = 1.0
+        expected = {
+            "lo": lo.astype(rd),
+            "real_filters": reals.astype(cd),
+            "conj_real_filters": np.conj(reals.astype(cd)),
+            "analytic_filters": (reals * halves).astype(cd),
+            "half_planes": halves.astype(rd),
+        }
+        for name, value in expected.items():
+            made = getattr(pyramid, name)[level]
+            assert made.dtype == value.dtype and made.tobytes() == value.tobytes(), (name, level)
+        if level == 0:
+            lo0 = radial_lowpass(r / 2.0)
+            hi0 = np.sqrt(np.maximum(1.0 - lo0**2, 0.0))
+            assert pyramid.lo0.tobytes() == lo0.astype(rd).tobytes()
+            assert pyramid.hi0.tobytes() == hi0.astype(rd).tobytes()
 
 
 @pytest.mark.parametrize("shape", [(64, 64), (45, 70), (131, 262)])

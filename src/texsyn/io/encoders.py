@@ -64,8 +64,6 @@ def image_data(image: np.ndarray, bit_depth: int) -> np.ndarray:
 
 def encode_image(tmp: Path, data: np.ndarray, suffix: str, icc_profile: bytes | None = None) -> None:
     """Write samples from :func:`image_data` in the format of ``suffix`` (module docstring)."""
-    import imageio.v3 as iio
-
     if suffix == ".npy":
         encode_array(tmp, data)
         return
@@ -83,7 +81,16 @@ def encode_image(tmp: Path, data: np.ndarray, suffix: str, icc_profile: bytes | 
             png.Writer(
                 data.shape[1], data.shape[0], greyscale=planes in (1, 2), alpha=planes in (2, 4), bitdepth=16
             ).write_array(fh, data.reshape(-1))
+    elif suffix == ".png" and data.dtype == np.uint8 and (data.ndim == 2 or data.shape[-1] in (2, 3, 4)):
+        # Pillow's PNG writer, which imageio calls with the same arguments, without imageio's
+        # import and its registry of every Pillow format (0.05-0.1 s of a command; same bytes)
+        from PIL import Image
+
+        with open(tmp, "wb") as fh:
+            Image.fromarray(data).save(fh, format="PNG")
     else:
+        import imageio.v3 as iio
+
         kwargs: dict[str, Any] = {"quality": 95} if suffix in (".jpg", ".jpeg") else {}
         if icc_profile and suffix in (".jpg", ".jpeg"):
             kwargs["icc_profile"] = icc_profile

@@ -44,6 +44,7 @@ from ..models.portilla_projections import (
     parent_regression_rows,
     shrink_image_highpass,
 )
+from ..ops.allocator import retained_heap
 from ..ops.canvas import crop_to_output, extend_to_canvas, padded_canvas
 from ..ops.color import ColourSpace, colour_space
 from ..ops.linalg import fixed_order
@@ -379,13 +380,14 @@ class PortillaSimoncelli(TextureSynthesizer):
                 history.append(self.distance_to_exemplar(x, pyramid))
                 return x
 
-        out = alternate_projections(
-            np.asarray(initial, dtype=np.float64).copy(),
-            step,
-            iterations,
-            reporter=Reporter(callback, "iteration", iterations),
-            preview=self._to_image,
-        )
+        with retained_heap():  # the iterations' temporaries reuse the memory freed by the last
+            out = alternate_projections(
+                np.asarray(initial, dtype=np.float64).copy(),
+                step,
+                iterations,
+                reporter=Reporter(callback, "iteration", iterations),
+                preview=self._to_image,
+            )
         if not self.record_distance:
             return out, None
         families = {key: np.array([h[key] for h in history]) for key in (history[0] if history else {})}

@@ -21,8 +21,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.fft as sfft
 
+from ..ops import fft as pocketfft
 from ..transforms.complex_steerable import ComplexSteerablePyramid, for_each_band
 
 __all__ = [
@@ -55,7 +55,7 @@ def central_autocorrelation(x: np.ndarray, lags: int) -> np.ndarray:
     """
     h, w = x.shape[-2:]
     lag = max(0, min(lags, min(h, w) // 2 - 1))
-    ac = sfft.ifft2(np.abs(sfft.fft2(x)) ** 2).real / (h * w)
+    ac = pocketfft.ifft2(np.abs(pocketfft.fft2(x)) ** 2).real / (h * w)
     rows = np.arange(-lag, lag + 1) % h
     cols = np.arange(-lag, lag + 1) % w
     return ac[..., rows[:, None], cols[None, :]]

@@ -53,7 +53,10 @@ def _trim(c: np.ndarray) -> np.ndarray:
 
 
 def _series(c) -> np.ndarray:
-    """A trimmed float64 copy of ``c``, as ``polyutils.as_series([c])[0]``."""
+    """A trimmed float64 copy of ``c``, as ``polyutils.as_series([c])[0]`` (a 1-D float64
+    array, the usual case, is trimmed and copied without the conversions)."""
+    if type(c) is np.ndarray and c.dtype == np.float64 and c.ndim == 1:
+        return _trim(c).copy()
     return np.array(_trim(np.array(c, ndmin=1, copy=None)), dtype=np.float64, copy=True)
 
 

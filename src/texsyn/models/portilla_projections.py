@@ -21,8 +21,8 @@ import functools
 from typing import NamedTuple
 
 import numpy as np
-import scipy.fft as sfft
 
+from ..ops import fft as pocketfft
 from ..transforms.complex_steerable import fft_workers, for_each_band
 from .portilla import PSStatistics
 from .portilla_moments import FLAT_VARIANCE as FLAT_VARIANCE  # re-exported (round 1's home)
@@ -77,7 +77,7 @@ def filter_autocorrelation(x: np.ndarray, target: np.ndarray) -> np.ndarray:
         x = np.asarray(x, dtype=np.float64)
         cur = np.mean(x**2, axis=(-2, -1), keepdims=True)
         return x * np.sqrt(target[..., :1, :1] / np.where(cur > 0, cur, 1.0))
-    spec = sfft.rfft2(np.asarray(x, dtype=np.float32), workers=fft_workers(x.size))
+    spec = pocketfft.rfft2(np.asarray(x, dtype=np.float32), workers=fft_workers(x.size))
     return filter_autocorrelation_spectrum(spec, target, (h, w))
 
 
@@ -105,7 +105,7 @@ def filter_autocorrelation_spectrum(spec: np.ndarray, target: np.ndarray, shape:
             ]
         ).reshape(b.shape)
     spec *= _symmetric_filter_gain(coef, plan)
-    return sfft.irfft2(spec, s=(h, w), workers=fft_workers(2 * spec.size))
+    return pocketfft.irfft2(spec, s=(h, w), workers=fft_workers(2 * spec.size))
 
 
 class _WindowPlan(NamedTuple):
@@ -317,7 +317,7 @@ def impose_lowpass_statistics(
         out = filter_autocorrelation_spectrum(spectrum, window, (h, w)).astype(np.float64)
     else:
         if spectrum is not None:
-            images = sfft.irfft2(spectrum, s=(h, w), workers=fft_workers(2 * spectrum.size))
+            images = pocketfft.irfft2(spectrum, s=(h, w), workers=fft_workers(2 * spectrum.size))
         assert images is not None
         if active.all():  # no copies in and out of the active channels
             out = np.asarray(filter_autocorrelation(images, window), dtype=np.float64)

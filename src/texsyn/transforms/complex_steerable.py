@@ -28,9 +28,9 @@ import functools
 from collections.abc import Callable
 
 import numpy as np
-import scipy.fft as sfft
 
-from ..ops.linalg import worker_count
+from ..ops import fft as pocketfft
+from ..ops.linalg import parallel_map, worker_count
 from .steerable import crop_indices, oriented_windows, pyramid_sizes, radial_lowpass
 
 __all__ = ["ComplexSteerablePyramid", "fft_workers", "for_each_band", "inverse_norm"]
@@ -65,14 +65,25 @@ def _runs(indices: np.ndarray) -> list[tuple[slice, slice]]:
 
 def inverse_norm(n: int, dtype) -> np.ndarray:
     """pocketfft's ``1 / n`` normalisation factor, a 0-d array of ``dtype``: computed in long
-    double, then rounded once (``norm_fct`` of scipy's ``pypocketfft``)."""
-    return np.asarray(np.longdouble(1) / np.longdouble(n)).astype(dtype)
+    double, then rounded once (``norm_fct`` of scipy's ``pypocketfft``); read-only, computed
+    once per size and type (the synthesis asks for it 25 times an iteration)."""
+    return _inverse_norm(int(n), np.dtype(dtype))
+
+
+@functools.cache
+def _inverse_norm(n: int, dtype: np.dtype) -> np.ndarray:
+    factor = np.asarray(np.longdouble(1) / np.longdouble(n)).astype(dtype)
+    factor.flags.writeable = False
+    return factor
 
 
 #: bands of this many pixels or more are processed one at a time
 _BAND_BY_BAND = 1 << 14
 #: FFTs of this many values or more use every CPU of the process
 _THREADED_FFT = 1 << 17
+#: frequencies per block of rows in which :class:`ComplexSteerablePyramid` computes its
+#: filters (the blocks' temporaries stay small and in the cache; they share texsyn's threads)
+_FILTER_BLOCK = 1 << 13
 
 
 def fft_workers(size: int) -> int:
@@ -85,6 +96,13 @@ def fft_workers(size: int) -> int:
     (12 bands) but make transforms of a few 10^4 values slower.
     """
     return worker_count() if size >= _THREADED_FFT else 1
+
+
+def _row_blocks(size: tuple[int, int]) -> list[slice]:
+    """Blocks of about :data:`_FILTER_BLOCK` values of a ``size`` grid, whole rows."""
+    h, w = size
+    rows = max(1, _FILTER_BLOCK // max(w, 1))
+    return [slice(start, min(start + rows, h)) for start in range(0, h, rows)]
 
 
 def for_each_band(function: Callable[[slice], None], count: int, size: int) -> None:
@@ -142,26 +160,61 @@ class ComplexSteerablePyramid:
                 f"scales; need at least {2 ** (self.n_scales + 1)} pixels per side"
             )
         self.sizes = pyramid_sizes(self.shape, self.n_scales)
-        r0, _ = self._polar(self.shape)
-        self.lo0 = radial_lowpass(r0 / 2.0)
-        self.hi0 = np.sqrt(np.maximum(1.0 - self.lo0**2, 0.0))
-        self.lo, self.real_filters, self.analytic_filters, self.half_planes = [], [], [], []
-        self.conj_real_filters = []  # np.conj(real_filters[s]), kept for reconstruct_level
-        for size in self.sizes[: self.n_scales]:
-            r, theta = self._polar(size)
-            lo = radial_lowpass(r)
-            reals = oriented_windows(theta, np.sqrt(np.maximum(1.0 - lo**2, 0.0)), k)
-            # analytic bands: the half plane each orientation points to, doubled
-            c = np.cos(theta[None] - (np.pi * np.arange(k) / k)[:, None, None])
-            halves = np.where(c > 1e-12, 2.0, np.where(c < -1e-12, 0.0, 1.0))
-            halves[:, 0, 0] = 1.0
-            analytic = reals * halves
-            rd, cd = self.real_dtype, np.result_type(self.real_dtype, np.complex64)
-            self.lo.append(lo.astype(rd))
-            self.real_filters.append(reals.astype(cd))
-            self.conj_real_filters.append(np.conj(self.real_filters[-1]))
-            self.analytic_filters.append(analytic.astype(cd))
-            self.half_planes.append(halves.astype(rd))
+        self.lo0 = np.empty(self.shape)  # radial_lowpass(r / 2) on the finest grid, filled below
+        self.hi0 = np.empty(self.shape)
+        self.lo: list[np.ndarray] = []
+        self.real_filters: list[np.ndarray] = []
+        self.conj_real_filters: list[np.ndarray] = []  # np.conj(real_filters[s]), for reconstruct_level
+        self.analytic_filters: list[np.ndarray] = []
+        self.half_planes: list[np.ndarray] = []
+        rd, cd = self.real_dtype, np.result_type(self.real_dtype, np.complex64)
+        for level, size in enumerate(self.sizes[: self.n_scales]):
+            freqs = (
+                2 * np.pi * np.fft.fftfreq(size[0])[:, None],
+                2 * np.pi * np.fft.fftfreq(size[1])[None, :],
+            )
+            filters = (
+                np.empty(size, dtype=rd),  # lo
+                np.empty((k,) + size, dtype=cd),  # real_filters
+                np.empty((k,) + size, dtype=cd),  # conj_real_filters
+                np.empty((k,) + size, dtype=cd),  # analytic_filters
+                np.empty((k,) + size, dtype=rd),  # half_planes
+            )
+
+            def fill(rows: slice, level=level, freqs=freqs, filters=filters) -> None:
+                lo_out, reals_out, conj_out, analytic_out, halves_out = filters
+                fy, fx = freqs[0][rows], freqs[1]
+                r, theta = np.hypot(fx, fy), np.arctan2(fy, fx)  # _polar's, on these rows
+                if level == 0:
+                    self.lo0[rows] = lo0 = radial_lowpass(r / 2.0)
+                    self.hi0[rows] = np.sqrt(np.maximum(1.0 - lo0**2, 0.0))
+                lo = radial_lowpass(r)
+                reals = oriented_windows(theta, np.sqrt(np.maximum(1.0 - lo**2, 0.0)), k)
+                # analytic bands: the half plane each orientation points to, doubled
+                c = np.cos(theta[None] - (np.pi * np.arange(k) / k)[:, None, None])
+                halves = np.where(c > 1e-12, 2.0, np.where(c < -1e-12, 0.0, 1.0))
+                if rows.start == 0:
+                    halves[:, 0, 0] = 1.0
+                lo_out[rows] = lo
+                reals_out[:, rows] = reals
+                np.conj(reals_out[:, rows], out=conj_out[:, rows])
+                analytic_out[:, rows] = reals * halves
+                halves_out[:, rows] = halves
+
+            # pointwise functions of the frequency, so blocks of rows give the numbers of the
+            # whole grid; the blocks' powers and cosines are long NumPy calls that release the
+            # GIL, shared among texsyn's threads (issue 20: 256x256, 33 -> 21 ms on two cores;
+            # 2048x2048, whose whole-grid temporaries page-faulted, 3.4-6.1 -> 1.2-1.5 s)
+            parallel_map(fill, _row_blocks(size))
+            for filter_list, values in zip(
+                (self.lo, self.real_filters, self.conj_real_filters, self.analytic_filters, self.half_planes),
+                filters,
+            ):
+                filter_list.append(values)
+        if not self.n_scales:  # no level filled them
+            r0, _ = self._polar(self.shape)
+            self.lo0 = radial_lowpass(r0 / 2.0)
+            self.hi0 = np.sqrt(np.maximum(1.0 - self.lo0**2, 0.0))
         self.lo0 = self.lo0.astype(self.real_dtype)
         self.hi0 = self.hi0.astype(self.real_dtype)
         # L(r/2) at every level's resolution: the low-pass that the partially reconstructed
@@ -188,22 +241,22 @@ class ComplexSteerablePyramid:
         """
         x = np.asarray(x)
         dtype = np.result_type(self.real_dtype, np.complex64) if np.iscomplexobj(x) else self.real_dtype
-        return sfft.fft2(x.astype(dtype, copy=False), workers=fft_workers(x.size))
+        return pocketfft.fft2(x.astype(dtype, copy=False), workers=fft_workers(x.size))
 
     def rfft(self, x: np.ndarray) -> np.ndarray:
         """``rfft2`` of real arrays in the pyramid's precision: the columns ``0 .. w // 2`` of
         :meth:`fft` (pocketfft computes the full transform of real data as this half, then
         mirrors it: the same bytes), in half the time."""
         x = np.asarray(x)
-        return sfft.rfft2(x.astype(self.real_dtype, copy=False), workers=fft_workers(x.size))
+        return pocketfft.rfft2(x.astype(self.real_dtype, copy=False), workers=fft_workers(x.size))
 
     def irfft(self, half: np.ndarray, level: int = 0) -> np.ndarray:
         """The real image of the size of ``level`` from its half spectrum (``irfft2``)."""
-        return sfft.irfft2(half, s=self.sizes[level], workers=fft_workers(2 * half.size))
+        return pocketfft.irfft2(half, s=self.sizes[level], workers=fft_workers(2 * half.size))
 
     def ifft(self, x: np.ndarray) -> np.ndarray:
         """Inverse 2-D FFT over the last two axes (complex result; threads as :meth:`fft`)."""
-        return sfft.ifft2(x, workers=fft_workers(x.size))
+        return pocketfft.ifft2(x, workers=fft_workers(x.size))
 
     @staticmethod
     def _polar(shape):
@@ -255,7 +308,7 @@ class ComplexSteerablePyramid:
             np.multiply(spec[..., coarse_r, :], scale, out=columns[..., fine_r, :wc])
             columns[..., fine_r.stop : next_r.start, :wc] = 0.0  # the zero padding between the runs
         columns[..., : rows[0][0].start, :wc] = 0.0
-        columns = sfft.ifft(columns, axis=-2, norm="forward", overwrite_x=True, workers=workers)
+        columns = pocketfft.ifft(columns, axis=-2, norm="forward", overwrite_x=True, workers=workers)
         # scale by 1 / (h w) as pocketfft does (real and imaginary parts by a real factor) while
         # copying into the full array, whose other columns are the zero column's transform
         real = columns.real.dtype
@@ -272,7 +325,7 @@ class ComplexSteerablePyramid:
             )
             previous = fine_c.stop
         out[..., previous:] = columns[..., wc : wc + 1]
-        return sfft.ifft(out, axis=-1, norm="forward", overwrite_x=True, workers=workers)
+        return pocketfft.ifft(out, axis=-1, norm="forward", overwrite_x=True, workers=workers)
 
     def expand(self, image: np.ndarray, level: int) -> np.ndarray:
         """Interpolate ``(..., h, w)`` arrays of level ``level + 1`` to the size of ``level``."""
@@ -322,7 +375,7 @@ class ComplexSteerablePyramid:
         c, k = low.shape[0], filters.shape[0]
         out = np.empty((c, k) + low.shape[1:], dtype=np.result_type(low.dtype, filters.dtype))
         np.multiply(low[:, None], filters, out=out)
-        return sfft.ifft2(out, overwrite_x=True, workers=fft_workers(out.size))  # in place
+        return pocketfft.ifft2(out, overwrite_x=True, workers=fft_workers(out.size))  # in place
 
     def lowpass_image(self, residual: np.ndarray) -> np.ndarray:
         """The coarsest partially reconstructed image: the low-pass residual filtered by ``L(r/2)``."""

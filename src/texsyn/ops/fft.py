@@ -1,0 +1,146 @@
+"""SciPy's pocketfft transforms without the start-up cost of importing ``scipy.fft``.
+
+``import scipy.fft`` costs about 0.15 s of every command that uses it (its package imports
+``scipy.special`` and SciPy's array-API layer, which imports ``numpy.f2py``,
+``numpy.testing`` ...), more than a Portilla-Simoncelli synthesis of a grey 256x256 image
+spends in a tenth of its iterations. The transforms themselves are one compiled module,
+``scipy.fft._pocketfft.pypocketfft``: this module loads that file alone (under its own name,
+so that a later ``import scipy.fft`` finds and reuses it) and calls it with the arguments
+``scipy.fft`` passes to it, which gives the same bytes (``tests/test_ops_fft.py``). Where the
+file cannot be found or loaded (another SciPy layout), ``scipy.fft`` itself is used.
+
+Only the forms the steerable pyramids need are offered: 2-D transforms over the last two
+axes and 1-D transforms along one axis, complex or real, in the input's precision
+(``float32``/``complex64`` stay single precision), ``workers`` threads (pocketfft
+transforms each line on one thread: the bytes do not depend on it,
+``docs/determinism.md``). ``docs/performance.md`` ("Start-up") measures the saving.
+"""
+
+from __future__ import annotations
+
+import functools
+import importlib.machinery
+import importlib.util
+import os
+import sys
+
+import numpy as np
+
+__all__ = ["fft2", "ifft", "ifft2", "irfft2", "rfft2"]
+
+#: the compiled module of SciPy that every ``scipy.fft`` transform of NumPy arrays ends in
+_MODULE = "scipy.fft._pocketfft.pypocketfft"
+#: pocketfft's normalisation codes (``scipy.fft``'s ``_NORM_MAP``): 0 none, 2 ``1 / n``
+_NONE, _INVERSE = 0, 2
+
+
+@functools.cache
+def _pocketfft():
+    """SciPy's ``pypocketfft`` module, loaded without its package; None if it cannot be."""
+    module = sys.modules.get(_MODULE)
+    if module is not None:
+        return module
+    try:
+        scipy = importlib.util.find_spec("scipy")
+        if scipy is None or scipy.origin is None:
+            return None
+        folder = os.path.join(os.path.dirname(scipy.origin), "fft", "_pocketfft")
+        for suffix in importlib.machinery.EXTENSION_SUFFIXES:
+            path = os.path.join(folder, "pypocketfft" + suffix)
+            if os.path.isfile(path):
+                break
+        else:
+            return None
+        spec = importlib.util.spec_from_file_location(_MODULE, path)
+        if spec is None or spec.loader is None:
+            return None
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        # the same call scipy.fft makes for fft2 of a small array: checks the interface
+        module.c2c(np.ones((2, 2)), (0, 1), True, _NONE, None, 1)
+    except Exception:  # another layout or interface: scipy.fft below
+        return None
+    sys.modules[_MODULE] = module  # a later ``import scipy.fft`` reuses it
+    return module
+
+
+def _scipy_fft():
+    import scipy.fft
+
+    return scipy.fft
+
+
+def _as_float(x) -> np.ndarray:
+    """The array pocketfft transforms: ``scipy.fft``'s conversion (floating point kept as it
+    is, float16 to float32, other types to float64; native byte order, aligned)."""
+    x = np.asarray(x)
+    if x.dtype == np.float16:
+        return x.astype(np.float32)
+    if x.dtype.kind not in "fc":
+        return x.astype(np.float64)
+    dtype = x.dtype.newbyteorder("=")
+    return np.array(x, dtype=dtype, copy=None if x.flags.aligned else True)
+
+
+def _last_two(x: np.ndarray) -> tuple[int, int]:
+    if x.ndim < 2:
+        raise ValueError("a 2-D transform needs at least two axes")
+    return (x.ndim - 2, x.ndim - 1)
+
+
+def fft2(x, *, workers: int = 1, overwrite_x: bool = False) -> np.ndarray:
+    """``scipy.fft.fft2(x, workers=workers, overwrite_x=overwrite_x)`` (last two axes)."""
+    module = _pocketfft()
+    if module is None:
+        return _scipy_fft().fft2(x, workers=workers, overwrite_x=overwrite_x)
+    a = _as_float(x)
+    out = a if overwrite_x and a.dtype.kind == "c" else None
+    return module.c2c(a, _last_two(a), True, _NONE, out, workers)
+
+
+def ifft2(x, *, workers: int = 1, overwrite_x: bool = False) -> np.ndarray:
+    """``scipy.fft.ifft2(x, workers=workers, overwrite_x=overwrite_x)`` (last two axes)."""
+    module = _pocketfft()
+    if module is None:
+        return _scipy_fft().ifft2(x, workers=workers, overwrite_x=overwrite_x)
+    a = _as_float(x)
+    out = a if overwrite_x and a.dtype.kind == "c" else None
+    return module.c2c(a, _last_two(a), False, _INVERSE, out, workers)
+
+
+def ifft(x, axis: int = -1, *, norm: str | None = None, workers: int = 1, overwrite_x: bool = False):
+    """``scipy.fft.ifft(x, axis=axis, norm=norm, ...)``; ``norm`` None (``1 / n``) or ``"forward"`` (none)."""
+    module = _pocketfft()
+    if module is None:
+        return _scipy_fft().ifft(x, axis=axis, norm=norm, workers=workers, overwrite_x=overwrite_x)
+    if norm not in (None, "backward", "forward"):
+        raise ValueError(f"norm must be None, 'backward' or 'forward', not {norm!r}")
+    a = _as_float(x)
+    out = a if overwrite_x and a.dtype.kind == "c" else None
+    return module.c2c(a, (axis % a.ndim,), False, _NONE if norm == "forward" else _INVERSE, out, workers)
+
+
+def rfft2(x, *, workers: int = 1) -> np.ndarray:
+    """``scipy.fft.rfft2(x, workers=workers)`` of a real array (last two axes)."""
+    module = _pocketfft()
+    if module is None:
+        return _scipy_fft().rfft2(x, workers=workers)
+    a = _as_float(x)
+    if a.dtype.kind == "c":
+        raise TypeError("rfft2 needs a real array")
+    return module.r2c(a, _last_two(a), True, _NONE, None, workers)
+
+
+def irfft2(x, s: tuple[int, int], *, workers: int = 1) -> np.ndarray:
+    """``scipy.fft.irfft2(x, s=s, workers=workers)``: the real ``s``-sized images of half
+    spectra ``x`` whose last axis has ``s[1] // 2 + 1`` columns and the one before ``s[0]`` rows."""
+    module = _pocketfft()
+    if module is None:
+        return _scipy_fft().irfft2(x, s=s, workers=workers)
+    a = _as_float(x)
+    if a.dtype.kind != "c":
+        a = a + 0j
+    h, w = int(s[0]), int(s[1])
+    if a.shape[-2:] != (h, w // 2 + 1):
+        raise ValueError(f"half spectra of {a.shape[-2:]} do not fit images of {(h, w)}")
+    return module.c2r(a, _last_two(a), w, False, _INVERSE, None, workers)

@@ -1,0 +1,67 @@
+"""``texsyn.ops.fft``: SciPy's pocketfft without ``import scipy.fft``, the same bytes."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import scipy.fft
+
+from texsyn.ops import fft
+
+
+def _same(a: np.ndarray, b: np.ndarray) -> bool:
+    return a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64, np.complex64, np.complex128])
+@pytest.mark.parametrize("shape", [(2, 3, 16, 12), (1, 15, 9)])
+@pytest.mark.parametrize("use_scipy", [False, True])
+def test_transforms_give_scipy_fft_bytes(dtype, shape, use_scipy, monkeypatch):
+    if use_scipy:  # the fallback where SciPy's compiled module cannot be loaded alone
+        monkeypatch.setattr(fft, "_pocketfft", lambda: None)
+    rng = np.random.default_rng(0)
+    x = rng.standard_normal(shape).astype(dtype)
+    if np.iscomplexobj(x):
+        x += 1j * rng.standard_normal(shape).astype(dtype)
+    for workers in (1, 2):
+        assert _same(fft.fft2(x, workers=workers), scipy.fft.fft2(x, workers=workers))
+        assert _same(fft.ifft2(x, workers=workers), scipy.fft.ifft2(x, workers=workers))
+        for axis in (-1, -2):
+            for norm in (None, "forward"):
+                assert _same(
+                    fft.ifft(x, axis=axis, norm=norm, workers=workers),
+                    scipy.fft.ifft(x, axis=axis, norm=norm, workers=workers),
+                )
+        if not np.iscomplexobj(x):
+            half = scipy.fft.rfft2(x, workers=workers)
+            assert _same(fft.rfft2(x, workers=workers), half)
+            assert _same(
+                fft.irfft2(half, s=shape[-2:], workers=workers), scipy.fft.irfft2(half, s=shape[-2:])
+            )
+    # in place where asked, as scipy.fft does for a complex array
+    y = x.astype(np.result_type(dtype, np.complex64))
+    expected = scipy.fft.ifft2(y)
+    assert _same(fft.ifft2(y.copy(), overwrite_x=True), expected)
+    # wrong inputs are refused, not transformed
+    with pytest.raises(ValueError):
+        fft.fft2(np.ones(4))
+    if not use_scipy:
+        with pytest.raises(ValueError):
+            fft.irfft2(np.ones((4, 4), complex), s=(4, 8))
+
+
+def test_portilla_simoncelli_imports_no_scipy_fft_package():
+    """The method's modules load SciPy's compiled transforms only (``docs/performance.md``)."""
+    code = (
+        "import texsyn.methods.portilla_simoncelli, texsyn.ops.fft as f, json, sys\n"
+        "assert f._pocketfft() is not None\n"
+        "print(json.dumps(sorted(sys.modules)))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    modules = set(json.loads(out.stdout.strip().splitlines()[-1]))
+    assert "scipy.fft._pocketfft.pypocketfft" in modules
+    assert not {m for m in modules if m.startswith("scipy.") and not m.startswith("scipy.fft._pocketfft")}
