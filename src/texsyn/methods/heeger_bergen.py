@@ -20,7 +20,7 @@ import numpy as np
 from .._validation import Range
 from ..drivers.alternating import alternate_projections
 from ..models.histograms import SubbandHistograms, subband_histograms
-from ..ops.buffers import LARGE_SCRATCH_BYTES, scratch_empty
+from ..ops.allocator import LARGE_SCRATCH_BYTES, scratch_empty
 from ..ops.canvas import crop_to_output, padded_canvas
 from ..ops.color import ColourSpace, colour_space
 from ..ops.fourier import periodic_smooth_decomposition
@@ -152,7 +152,7 @@ class HeegerBergen(TextureSynthesizer):
         transforms' spectra live in one workspace of the pyramid; the next step's analysis
         writes its subbands into this step's, and the reconstruction is written over the
         image the step was given. These arrays are made once, in ordinary pages
-        (:func:`texsyn.ops.buffers.scratch_empty`).
+        (:func:`texsyn.ops.allocator.scratch_empty`).
         """
         channels = self.model_.channels
         scratch = scratch_empty((channels * pyramid.shape[0] * pyramid.shape[1],), dtype=np.uint64)

@@ -14,7 +14,7 @@ import sys
 
 import numpy as np
 
-from .buffers import scratch_empty
+from .allocator import scratch_empty
 from .color import ColorPCA
 from .jit import jit
 from .linalg import parallel_map, worker_count
@@ -93,7 +93,7 @@ def hist_target_rows(n: int, references_sorted: np.ndarray) -> np.ndarray:
     cums[:, 0] = 0.0
     np.cumsum(ys, axis=1, out=cums[:, 1:])  # each row's sequential sum, as np.cumsum of the row
     cums /= ny
-    out = scratch_empty((rows, n))  # kept by an iterative method: ordinary pages (ops.buffers)
+    out = scratch_empty((rows, n))  # kept by an iterative method: ordinary pages (ops.allocator)
     chunks = (
         np.array_split(np.arange(rows), min(rows, worker_count()))
         if rows * n >= 1 << 20

@@ -29,7 +29,7 @@ from math import factorial
 
 import numpy as np
 
-from ..ops.buffers import scratch_empty
+from ..ops.allocator import scratch_empty
 from .coefficients import Coefficients
 
 __all__ = [
@@ -272,7 +272,7 @@ class SteerablePyramid:
 
     def _coefficients(self, channels: int | None) -> Pyramid:
         """A :class:`Pyramid` of uninitialised coefficients (``(h, w, C)`` views of ``(C, h, w)``
-        planes, :func:`texsyn.ops.buffers.scratch_empty`), for :meth:`forward` to write into."""
+        planes, :func:`texsyn.ops.allocator.scratch_empty`), for :meth:`forward` to write into."""
         lead = () if channels is None else (channels,)
         nd = len(lead) + 2
 
@@ -309,7 +309,7 @@ class SteerablePyramid:
         iterative method reuses them instead of faulting in fresh pages: arrays of 32 MiB and
         more are mapped afresh at every allocation; issue 20), and ``workspace``
         (:meth:`workspace`) holds the spectra (and, without ``out``, gives the coefficients
-        their arrays, :func:`texsyn.ops.buffers.scratch_empty`). Same bytes either way.
+        their arrays, :func:`texsyn.ops.allocator.scratch_empty`). Same bytes either way.
 
         The channels of an ``(H, W, C)`` image are transformed as contiguous ``(C, H, W)``
         planes (the coefficients are ``(h, w, C)`` views of such planes): the transforms
