@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import subprocess
 import sys
 import tempfile
@@ -37,7 +36,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import DEFAULT_TEXTURES, RESULTS, machine
+from _common import DEFAULT_TEXTURES, RESULTS, machine, peak_reset, status_kib, time_process, write_report
 
 PHOTO_SHAPE = (3000, 4000)  # height, width: a 12-megapixel phone photo
 SOURCE = "gh_tartavel_vistex/Brick-00.png"
@@ -53,14 +52,6 @@ def make_photo(textures: Path, path: Path) -> None:
     texsyn.io.write_image(path, photo)
 
 
-def _status_kib(field: str) -> int:
-    with open("/proc/self/status") as fh:
-        for line in fh:
-            if line.startswith(field + ":"):
-                return int(line.split()[1])
-    return 0
-
-
 def child_fit(method: str, photo: str) -> int:
     """Fit ``method`` on the photo in this process; print one JSON line."""
     import texsyn
@@ -74,28 +65,15 @@ def child_fit(method: str, photo: str) -> int:
     if estimate > record["limit"]:
         record["refused"] = True
     else:
-        base = _status_kib("VmRSS")
-        with open("/proc/self/clear_refs", "w") as fh:
-            fh.write("5")
+        base = status_kib("VmRSS")
+        peak_reset()
         w0, c0 = time.perf_counter(), time.process_time()
         model.fit(image)
         record["wall"] = time.perf_counter() - w0
         record["cpu"] = time.process_time() - c0
-        record["peak"] = max(0, _status_kib("VmHWM") - base) * 1024.0
+        record["peak"] = max(0, status_kib("VmHWM") - base) * 1024.0
     print(json.dumps(record), flush=True)
     return 0
-
-
-def time_process(args: list[str]) -> tuple[float, float, float]:
-    """Wall, CPU (user + system, all threads) and peak RSS (bytes) of one child process."""
-    start = time.perf_counter()
-    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    _, status, usage = os.wait4(proc.pid, 0)
-    wall = time.perf_counter() - start
-    if os.waitstatus_to_exitcode(status) != 0:
-        err = proc.stderr.read().decode()[-300:] if proc.stderr else ""
-        raise RuntimeError(f"{' '.join(args)} failed: {err}")
-    return wall, usage.ru_utime + usage.ru_stime, usage.ru_maxrss * 1024.0
 
 
 def mib(x: float) -> str:
@@ -154,9 +132,7 @@ def main(argv: list[str] | None = None) -> int:
                 f"| {method} | " + " | ".join(fit_cells) + f" | {wall:.2f} | {cpu:.2f} | {mib(peak)} |"
             )
             print(lines[-1], flush=True)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text("\n".join(lines) + "\n")
-    print(f"\nwrote {args.out}")
+    write_report(args.out, lines)
     return 0
 
 

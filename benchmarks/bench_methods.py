@@ -37,7 +37,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import statistics
 import subprocess
 import sys
@@ -48,7 +47,16 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import DEFAULT_TEXTURES, REPO, RESULTS, machine
+from _common import (
+    DEFAULT_TEXTURES,
+    REPO,
+    RESULTS,
+    machine,
+    peak_reset,
+    status_kib,
+    time_process,
+    write_report,
+)
 
 EXEMPLAR = "gh_tartavel_vistex/Brick-00.png"
 
@@ -187,19 +195,6 @@ def _release_freed() -> None:
         pass
 
 
-def _peak_reset() -> None:
-    with open("/proc/self/clear_refs", "w") as fh:
-        fh.write("5")
-
-
-def _status_kib(field: str) -> int:
-    with open("/proc/self/status") as fh:
-        for line in fh:
-            if line.startswith(field + ":"):
-                return int(line.split()[1])
-    return 0
-
-
 def child_main(method: str, kind: str, sizes: str, repeats: str, textures: str, budget: str) -> int:
     import texsyn
 
@@ -224,8 +219,8 @@ def child_main(method: str, kind: str, sizes: str, repeats: str, textures: str, 
         walls, cpus, peaks = [], [], []
         for r in range(int(repeats)):
             _release_freed()
-            base = _status_kib("VmRSS")
-            _peak_reset()
+            base = status_kib("VmRSS")
+            peak_reset()
             w0, c0 = time.perf_counter(), time.process_time()
             model = texsyn.make_method(method).fit(image)
             w1 = time.perf_counter()
@@ -233,7 +228,7 @@ def child_main(method: str, kind: str, sizes: str, repeats: str, textures: str, 
             w2, c2 = time.perf_counter(), time.process_time()
             walls.append((w2 - w0, w2 - w1))
             cpus.append(c2 - c0)
-            peaks.append(max(0, _status_kib("VmHWM") - base) * 1024.0)
+            peaks.append(max(0, status_kib("VmHWM") - base) * 1024.0)
             if w2 - w0 > 10:
                 break
         total = statistics.median(t for t, _ in walls)
@@ -255,20 +250,6 @@ def child_main(method: str, kind: str, sizes: str, repeats: str, textures: str, 
 
 
 # ---------------------------------------------------------------------------- whole process
-def time_process(args: list[str]) -> tuple[float, float, float]:
-    """Wall, CPU (user + system, all threads) and peak RSS (bytes) of one child process."""
-    start = time.perf_counter()
-    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    _, status, usage = os.wait4(proc.pid, 0)
-    wall = time.perf_counter() - start
-    proc.returncode = os.waitstatus_to_exitcode(status)
-    if proc.returncode != 0:
-        raise RuntimeError(
-            f"{' '.join(args)} failed: {proc.stderr.read().decode()[-500:] if proc.stderr else ''}"
-        )
-    return wall, usage.ru_utime + usage.ru_stime, usage.ru_maxrss * 1024.0
-
-
 def process_case(method: str, kind: str, repeats: int, textures: Path, folder: Path) -> dict:
     import texsyn.io
 
@@ -454,9 +435,7 @@ def main(argv: list[str] | None = None) -> int:
             ]
             print(lines[-2], flush=True)
 
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text("\n".join(lines) + "\n")
-    print(f"\nwrote {args.out}")
+    write_report(args.out, lines)
     return 0
 
 

@@ -90,22 +90,23 @@ def _last_two(x: np.ndarray) -> tuple[int, int]:
 
 def fft2(x, *, workers: int = 1, overwrite_x: bool = False) -> np.ndarray:
     """``scipy.fft.fft2(x, workers=workers, overwrite_x=overwrite_x)`` (last two axes)."""
-    module = _pocketfft()
-    if module is None:
-        return _scipy_fft().fft2(x, workers=workers, overwrite_x=overwrite_x)
-    a = _as_float(x)
-    out = a if overwrite_x and a.dtype.kind == "c" else None
-    return module.c2c(a, _last_two(a), True, _NONE, out, workers)
+    return _complex_2d(x, True, workers, overwrite_x)
 
 
 def ifft2(x, *, workers: int = 1, overwrite_x: bool = False) -> np.ndarray:
     """``scipy.fft.ifft2(x, workers=workers, overwrite_x=overwrite_x)`` (last two axes)."""
+    return _complex_2d(x, False, workers, overwrite_x)
+
+
+def _complex_2d(x, forward: bool, workers: int, overwrite_x: bool) -> np.ndarray:
+    """The complex transform of the last two axes, forward or inverse, as ``scipy.fft`` makes it."""
     module = _pocketfft()
     if module is None:
-        return _scipy_fft().ifft2(x, workers=workers, overwrite_x=overwrite_x)
+        transform = _scipy_fft().fft2 if forward else _scipy_fft().ifft2
+        return transform(x, workers=workers, overwrite_x=overwrite_x)
     a = _as_float(x)
     out = a if overwrite_x and a.dtype.kind == "c" else None
-    return module.c2c(a, _last_two(a), False, _INVERSE, out, workers)
+    return module.c2c(a, _last_two(a), forward, _NONE if forward else _INVERSE, out, workers)
 
 
 def ifft(x, axis: int = -1, *, norm: str | None = None, workers: int = 1, overwrite_x: bool = False):
