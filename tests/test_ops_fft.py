@@ -63,5 +63,18 @@ def test_portilla_simoncelli_imports_no_scipy_fft_package():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     modules = set(json.loads(out.stdout.strip().splitlines()[-1]))
-    assert "scipy.fft._pocketfft.pypocketfft" in modules
     assert not {m for m in modules if m.startswith("scipy.") and not m.startswith("scipy.fft._pocketfft")}
+
+
+def test_scipy_fft_imported_after_the_module_is_whole():
+    """Loading the compiled module first leaves a later ``import scipy.fft`` its usual package:
+    the module bound to ``scipy.fft._pocketfft`` (dotted access), the same transforms."""
+    code = (
+        "import numpy as np, texsyn.ops.fft as f\n"
+        "assert f._pocketfft() is not None\n"
+        "import scipy.fft, scipy.fft._pocketfft.pypocketfft\n"
+        "x = np.arange(12.0).reshape(3, 4)\n"
+        "assert scipy.fft._pocketfft.pypocketfft.good_size(1001) == scipy.fft.next_fast_len(1001)\n"
+        "assert scipy.fft.fft2(x).tobytes() == f.fft2(x).tobytes()\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True)

@@ -4,9 +4,10 @@
 ``scipy.special`` and SciPy's array-API layer, which imports ``numpy.f2py``,
 ``numpy.testing`` ...), more than a Portilla-Simoncelli synthesis of a grey 256x256 image
 spends in a tenth of its iterations. The transforms themselves are one compiled module,
-``scipy.fft._pocketfft.pypocketfft``: this module loads that file alone (under its own name,
-so that a later ``import scipy.fft`` finds and reuses it) and calls it with the arguments
-``scipy.fft`` passes to it, which gives the same bytes (``tests/test_ops_fft.py``). Where the
+``scipy.fft._pocketfft.pypocketfft``: this module loads that file alone, under its own name
+but not entered in ``sys.modules`` (an entry there would make a later ``import scipy.fft``
+take it without binding it to its package ``scipy.fft._pocketfft``: dotted access to it would
+fail), and calls it with the arguments ``scipy.fft`` passes to it, which gives the same bytes (``tests/test_ops_fft.py``). Where the
 file cannot be found or loaded (another SciPy layout), ``scipy.fft`` itself is used.
 
 Only the forms the steerable pyramids need are offered: 2-D transforms over the last two
@@ -60,7 +61,6 @@ def _pocketfft():
         module.c2c(np.ones((2, 2)), (0, 1), True, _NONE, None, 1)
     except Exception:  # another layout or interface: scipy.fft below
         return None
-    sys.modules[_MODULE] = module  # a later ``import scipy.fft`` reuses it
     return module
 
 
