@@ -28,7 +28,7 @@ import inspect
 import os
 import threading
 from collections.abc import Callable, Iterator
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, wait
 from contextlib import contextmanager
 from typing import TypeVar
 
@@ -161,7 +161,9 @@ def parallel_map(function: Callable, items) -> list:
     For work that releases the GIL (NumPy sorts, FFTs, BLAS): each item is computed the same
     way whichever thread runs it, so the results do not depend on the number of workers. The
     calling thread computes the first item itself while the pool takes the others (one
-    hand-over fewer per call: Wei and Levoy's search makes one call per wavefront).
+    hand-over fewer per call: Wei and Levoy's search makes one call per wavefront). An error
+    is the first item's in item order, as in the loop: where the first item fails, the items
+    not started are cancelled and the running ones awaited, and its exception is raised.
     """
     items = list(items)
     if len(items) <= 1 or worker_count() == 1:
@@ -170,9 +172,12 @@ def parallel_map(function: Callable, items) -> list:
     rest = [pool.submit(function, item) for item in items[1:]]
     try:
         first = function(items[0])
-    finally:
-        done = [future.result() for future in rest]
-    return [first, *done]
+    except BaseException:
+        for future in rest:
+            future.cancel()
+        wait(rest)  # no work of this call left running behind its exception
+        raise
+    return [first, *(future.result() for future in rest)]
 
 
 def _thread_pool() -> ThreadPoolExecutor:

@@ -1,0 +1,33 @@
+"""``texsyn.ops.linalg.parallel_map``: the loop's results and errors on any number of workers."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import pytest
+
+from texsyn.ops import linalg
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_results_in_item_order_and_the_first_items_error(monkeypatch, workers):
+    monkeypatch.setattr(linalg, "worker_count", lambda: workers)
+    assert linalg.parallel_map(lambda i: (time.sleep(0.002 * (4 - i)), i)[1], range(5)) == list(range(5))
+    started, finished = threading.Event(), []
+
+    def item(i: int) -> int:
+        if i == 0:  # fails last in time (after item 1 has started), first in item order
+            started.wait(timeout=1.0 if workers > 1 else 0.0)
+            raise ValueError("item 0")
+        if i == 1:
+            started.set()
+            time.sleep(0.05)
+            finished.append(i)
+            return i
+        raise KeyError(i)
+
+    with pytest.raises(ValueError, match="item 0"):
+        linalg.parallel_map(item, range(4))
+    # on the pool, the item running when the first failed was awaited: nothing left writing
+    assert finished == ([1] if workers > 1 else [])
