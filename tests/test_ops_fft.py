@@ -52,6 +52,9 @@ def test_transforms_give_scipy_fft_bytes(dtype, shape, use_scipy, monkeypatch):
     if not use_scipy:
         with pytest.raises(ValueError):
             fft.irfft2(np.ones((4, 4), complex), s=(4, 8))
+    for axis in (x.ndim, -x.ndim - 1):  # not another axis than the one asked for
+        with pytest.raises(IndexError):
+            fft.ifft(x, axis=axis)
 
 
 def test_portilla_simoncelli_imports_no_scipy_fft_package():

@@ -26,6 +26,7 @@ import os
 import sys
 
 import numpy as np
+from numpy.lib.array_utils import normalize_axis_index
 
 __all__ = ["fft2", "ifft", "ifft2", "irfft2", "rfft2"]
 
@@ -118,7 +119,8 @@ def ifft(x, axis: int = -1, *, norm: str | None = None, workers: int = 1, overwr
         raise ValueError(f"norm must be None, 'backward' or 'forward', not {norm!r}")
     a = _as_float(x)
     out = a if overwrite_x and a.dtype.kind == "c" else None
-    return module.c2c(a, (axis % a.ndim,), False, _NONE if norm == "forward" else _INVERSE, out, workers)
+    axes = (normalize_axis_index(axis, a.ndim),)  # an axis out of range is refused, as scipy.fft does
+    return module.c2c(a, axes, False, _NONE if norm == "forward" else _INVERSE, out, workers)
 
 
 def rfft2(x, *, workers: int = 1) -> np.ndarray:
