@@ -95,6 +95,20 @@ def test_synth_with_wei_levoy_loads_no_scipy_filters_or_linear_algebra(tmp_path)
     assert not {"scipy.ndimage", "scipy.special", "scipy.fft", "scipy.linalg"} & modules
 
 
+def test_a_compiled_kernel_leaves_scipy_linalg_whole():
+    """numba's BLAS check finds ``cython_blas`` loaded alone; a later ``import scipy.linalg``
+    still binds it to its package (``scipy.linalg.cython_blas`` is public)."""
+    code = (
+        "from texsyn.ops.ranks import sorted_keys\n"  # a compiled kernel, loaded
+        "import numpy as np, sys\n"
+        "sorted_keys(np.arange(6.0).reshape(2, 3))\n"
+        "assert 'scipy.linalg' not in sys.modules\n"
+        "import scipy.linalg, scipy.linalg.cython_blas\n"
+        "assert scipy.linalg.cython_blas.__pyx_capi__['dgemm']\n"
+    )
+    assert "numba" in loaded_after(code)
+
+
 def test_registry_names_match_their_classes():
     assert list(METHODS)[:2] == ["quilting", "efros_leung"]
     for name in METHODS:

@@ -110,18 +110,35 @@ def _preload_cython_blas() -> None:
     function pointers (``importlib.import_module``). Loading the extension module under its
     full name first makes that import a lookup. Nothing changes for a process that has
     ``scipy.linalg`` already, or where the module cannot be found: numba then imports it itself.
+
+    The module stays in ``sys.modules`` only while numba makes its check (the import of
+    ``numba.np.arraymath``): left there, a later ``import scipy.linalg`` would take it without
+    binding it to the package (``scipy.linalg.cython_blas``, a public module, would raise
+    AttributeError). Imported again later, Cython gives the same module object.
     """
     import sys
 
     name = "scipy.linalg.cython_blas"
     with _preload_lock:
-        if name in sys.modules or "scipy.linalg" in sys.modules:
+        if name in sys.modules or "scipy.linalg" in sys.modules or "numba.np.arraymath" in sys.modules:
             return
-        _load_alone(name)
+        module = _load_alone(name)
+        if module is None:
+            return
+        try:
+            import numba.np.arraymath  # noqa: F401  (numba's BLAS check, which finds the module)
+        finally:
+            if sys.modules.get(name) is module:
+                package = sys.modules.get("scipy.linalg")
+                if package is None:
+                    del sys.modules[name]
+                else:  # imported meanwhile: bind it as the import system would have
+                    package.cython_blas = module  # type: ignore[attr-defined]
 
 
-def _load_alone(name: str) -> None:
-    """Load the extension module ``name`` of SciPy's ``linalg`` without its package."""
+def _load_alone(name: str) -> types.ModuleType | None:
+    """Load the extension module ``name`` of SciPy's ``linalg`` without its package, entered in
+    ``sys.modules``; None where it cannot be."""
     import importlib.machinery
     import importlib.util
     import sys
@@ -129,16 +146,18 @@ def _load_alone(name: str) -> None:
     try:
         scipy_spec = importlib.util.find_spec("scipy")
         if scipy_spec is None or not scipy_spec.submodule_search_locations:
-            return
+            return None
         places = [os.path.join(place, "linalg") for place in scipy_spec.submodule_search_locations]
         spec = importlib.machinery.PathFinder.find_spec(name, places)
         if spec is None or spec.loader is None:
-            return
+            return None
         module = importlib.util.module_from_spec(spec)
         sys.modules[name] = module
         spec.loader.exec_module(module)
+        return module
     except Exception:  # pragma: no cover - numba imports it the usual way
         sys.modules.pop(name, None)
+        return None
 
 
 def _passive_openmp() -> None:
