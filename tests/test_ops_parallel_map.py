@@ -31,3 +31,23 @@ def test_results_in_item_order_and_the_first_items_error(monkeypatch, workers):
         linalg.parallel_map(item, range(4))
     # on the pool, the item running when the first failed was awaited: nothing left writing
     assert finished == ([1] if workers > 1 else [])
+
+
+def test_a_later_items_error_waits_for_the_running_items(monkeypatch):
+    monkeypatch.setattr(linalg, "worker_count", lambda: 2)
+    started, finished = threading.Event(), []
+
+    def item(i: int) -> int:
+        if i == 2:  # on the pool, still running when item 1 fails
+            started.set()
+            time.sleep(0.05)
+            finished.append(i)
+            return i
+        started.wait(timeout=1.0)
+        if i == 1:
+            raise ValueError("item 1")
+        return i
+
+    with pytest.raises(ValueError, match="item 1"):
+        linalg.parallel_map(item, range(3))
+    assert finished == [2]  # awaited: nothing of the call left writing after its error

@@ -162,8 +162,9 @@ def parallel_map(function: Callable, items) -> list:
     way whichever thread runs it, so the results do not depend on the number of workers. The
     calling thread computes the first item itself while the pool takes the others (one
     hand-over fewer per call: Wei and Levoy's search makes one call per wavefront). An error
-    is the first item's in item order, as in the loop: where the first item fails, the items
-    not started are cancelled and the running ones awaited, and its exception is raised.
+    is the first failing item's in item order, as in the loop; before it is raised, the
+    items not started are cancelled and the running ones awaited (no work of the call goes
+    on writing into the caller's arrays behind its exception).
     """
     items = list(items)
     if len(items) <= 1 or worker_count() == 1:
@@ -172,12 +173,12 @@ def parallel_map(function: Callable, items) -> list:
     rest = [pool.submit(function, item) for item in items[1:]]
     try:
         first = function(items[0])
+        return [first, *(future.result() for future in rest)]
     except BaseException:
         for future in rest:
             future.cancel()
-        wait(rest)  # no work of this call left running behind its exception
+        wait(rest)
         raise
-    return [first, *(future.result() for future in rest)]
 
 
 def _thread_pool() -> ThreadPoolExecutor:
