@@ -55,6 +55,9 @@ def test_transforms_give_scipy_fft_bytes(dtype, shape, use_scipy, monkeypatch):
     for axis in (x.ndim, -x.ndim - 1):  # not another axis than the one asked for
         with pytest.raises(IndexError):
             fft.ifft(x, axis=axis)
+    assert _same(fft.fft2(x, workers=-1), scipy.fft.fft2(x, workers=-1))  # every CPU, as scipy.fft
+    with pytest.raises(ValueError):
+        fft.fft2(x, workers=0)  # refused, as scipy.fft does
 
 
 def test_portilla_simoncelli_imports_no_scipy_fft_package():

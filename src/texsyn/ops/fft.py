@@ -83,6 +83,20 @@ def _as_float(x) -> np.ndarray:
     return np.array(x, dtype=dtype, copy=None if x.flags.aligned else True)
 
 
+def _threads(workers: int) -> int:
+    """``scipy.fft``'s reading of ``workers``: a negative count from the CPUs (-1 all of them),
+    zero refused (pocketfft itself would take 0 as every hardware thread)."""
+    workers = int(workers)
+    if workers < 0:
+        cpus = os.cpu_count() or 1
+        if workers < -cpus:
+            raise ValueError(f"workers value out of range; got {workers}, must not be less than {-cpus}")
+        workers += 1 + cpus
+    elif workers == 0:
+        raise ValueError("workers must not be zero")
+    return workers
+
+
 def _last_two(x: np.ndarray) -> tuple[int, int]:
     if x.ndim < 2:
         raise ValueError("a 2-D transform needs at least two axes")
@@ -107,7 +121,7 @@ def _complex_2d(x, forward: bool, workers: int, overwrite_x: bool) -> np.ndarray
         return transform(x, workers=workers, overwrite_x=overwrite_x)
     a = _as_float(x)
     out = a if overwrite_x and a.dtype.kind == "c" else None
-    return module.c2c(a, _last_two(a), forward, _NONE if forward else _INVERSE, out, workers)
+    return module.c2c(a, _last_two(a), forward, _NONE if forward else _INVERSE, out, _threads(workers))
 
 
 def ifft(x, axis: int = -1, *, norm: str | None = None, workers: int = 1, overwrite_x: bool = False):
@@ -120,7 +134,7 @@ def ifft(x, axis: int = -1, *, norm: str | None = None, workers: int = 1, overwr
     a = _as_float(x)
     out = a if overwrite_x and a.dtype.kind == "c" else None
     axes = (normalize_axis_index(axis, a.ndim),)  # an axis out of range is refused, as scipy.fft does
-    return module.c2c(a, axes, False, _NONE if norm == "forward" else _INVERSE, out, workers)
+    return module.c2c(a, axes, False, _NONE if norm == "forward" else _INVERSE, out, _threads(workers))
 
 
 def rfft2(x, *, workers: int = 1) -> np.ndarray:
@@ -131,7 +145,7 @@ def rfft2(x, *, workers: int = 1) -> np.ndarray:
     a = _as_float(x)
     if a.dtype.kind == "c":
         raise TypeError("rfft2 needs a real array")
-    return module.r2c(a, _last_two(a), True, _NONE, None, workers)
+    return module.r2c(a, _last_two(a), True, _NONE, None, _threads(workers))
 
 
 def irfft2(x, s: tuple[int, int], *, workers: int = 1) -> np.ndarray:
@@ -146,4 +160,4 @@ def irfft2(x, s: tuple[int, int], *, workers: int = 1) -> np.ndarray:
     h, w = int(s[0]), int(s[1])
     if a.shape[-2:] != (h, w // 2 + 1):
         raise ValueError(f"half spectra of {a.shape[-2:]} do not fit images of {(h, w)}")
-    return module.c2r(a, _last_two(a), w, False, _INVERSE, None, workers)
+    return module.c2r(a, _last_two(a), w, False, _INVERSE, None, _threads(workers))
