@@ -204,18 +204,23 @@ class WeightedPatchBank:
         np.multiply(bank, bank, out=self._stacked[:, : self.dim])
         np.multiply(-2.0, bank, out=self._stacked[:, self.dim :])
 
-    def distances(self, queries: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    def distances(self, queries: np.ndarray, weights: np.ndarray, rows: slice | None = None) -> np.ndarray:
         """Distances of shape ``(Q, K)``, clamped at zero.
 
         Parameters
         ----------
         queries, weights : ndarray, shape (Q, D)
             Query vectors and their non-negative per-entry weights.
+        rows : slice, optional
+            Only these bank rows: ``(Q, len(rows))``. Starting at a multiple of
+            :data:`~texsyn.ops.linalg.BLOCK_COLUMNS` and that long, the values are those of
+            the full product's tiles (:func:`texsyn.ops.linalg.matmul`), the same bytes.
         """
         w = np.asarray(weights, dtype=np.float64)
         q = np.asarray(queries, dtype=np.float64)
         wq = w * q
-        d = matmul(np.concatenate([w, wq], axis=1), self._stacked.T)
+        stacked = self._stacked if rows is None else self._stacked[rows]
+        d = matmul(np.concatenate([w, wq], axis=1), stacked.T)
         d += np.sum(wq * q, axis=1)[:, None]
         return np.maximum(d, 0.0, out=d)
 
