@@ -1161,15 +1161,15 @@ def bounded_index_bytes(rows: float, dim: int, *, dims: int = 32, extra: int = 3
     """``(kept, building)`` bytes of a :class:`BoundedNearestIndex` of ``rows`` rows of ``dim`` values.
 
     ``kept``: the float32 projections and next coordinates, the residual norms and the
-    basis (the bank itself is the caller's and not counted); ``building``: the centred copies
-    of the bank (the index's, then :meth:`~BoundedNearestIndex.isolated`'s), its coordinates
-    and their squares (``docs/memory.md``). A query of ``m`` rows adds a few ``m x dim``
+    basis (the bank itself is the caller's and not counted); ``building``: a centred copy of
+    the bank (the index's, freed before :meth:`~BoundedNearestIndex.isolated` makes its
+    own), its coordinates and their squares (``docs/memory.md``). A query of ``m`` rows adds a few ``m x dim``
     arrays and, per worker, ``m x chunk`` float32 products.
     """
     p = min(dims, dim)
     t = min(p + max(extra, 0), dim)
     kept = rows * (4.0 * (p + 1) + 4.0 * (t - p) + 16.0) + 8.0 * dim * (t + 1)
-    building = rows * (16.0 * dim + 24.0 * t + 12.0 * p + 48.0) + 8.0 * dim * dim
+    building = rows * (8.0 * dim + 24.0 * t + 12.0 * p + 48.0) + 8.0 * dim * dim
     return kept, building
 
 
