@@ -169,7 +169,10 @@ def sparse_fit_bytes(
         n = n_atoms if k >= 2 * n_atoms else max(s + 1, int(k) // 2)
         atoms.append(n)
         t = min(k, float(ksvd_training))
-        ksvd = 64.0 * t * n + 24.0 * dim * t
+        # batch OMP's correlations, their working copy and the codes, the SVD updates'
+        # residuals: K-SVD alone peaks at 121 MiB (grey) and 153 MiB (colour) for T = 8000,
+        # n = 384, against 143 and 196 here (docs/memory.md, "Second round")
+        ksvd = 40.0 * t * n + 24.0 * dim * t
         pursuit = 17.0 * n * k + 130.0 * k
         peak = max(peak, kept + 8.0 * k * dim + max(8.0 * k * dim, ksvd, pursuit))
         kept += 8.0 * dim * n + 8.0 * k + 16.0 * sh * sw * c * (j > 0) + 8.0 * sh * sw * c
