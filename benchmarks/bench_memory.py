@@ -118,6 +118,7 @@ def _reset_peak() -> int:
 def measure(spec: dict) -> dict:
     """Run one configuration in this process; return estimates and measurements in bytes."""
     import texsyn
+    from texsyn.ops import ranks
     from texsyn.ops.linalg import matmul
 
     warnings.simplefilter("ignore")
@@ -138,10 +139,14 @@ def measure(spec: dict) -> dict:
             return None
         return fitted.modify(texture, 0.2) if modify else fitted.sample(shape, rng=0)
 
-    # warm-up: a small exemplar and an output larger than it, so that every code path runs
+    # warm-up: a small exemplar and an output larger than it, so that every code path runs,
+    # the threaded rank kernels included (larger runs take them; compiling one when its cache
+    # is stale holds about 12 MiB of resident memory for a moment, once per process)
     side = min(spec["side"], max(64, 2 * method.min_exemplar_size()[0]))
+    threshold, ranks.PARALLEL_RANK_VALUES = ranks.PARALLEL_RANK_VALUES, 0
     small = texsyn.make_method(method_name, **params).fit(exemplar[:side, :side])
     small.modify(texture[:24, :24], 0.2) if modify else small.sample((2 * side + 8,) * 2, rng=0)
+    ranks.PARALLEL_RANK_VALUES = threshold
     del small
     matmul(np.ones((1024, 512)), np.ones((512, 1024)))  # BLAS buffers, the product thread pool
 

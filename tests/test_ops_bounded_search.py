@@ -4,7 +4,12 @@ import numpy as np
 import pytest
 
 from texsyn.ops.linalg import fixed_order
-from texsyn.ops.search import BoundedNearestIndex, nearest_rows, nearest_rows_bounded
+from texsyn.ops.search import (
+    BoundedNearestIndex,
+    nearest_rows,
+    nearest_rows_bounded,
+    nearest_rows_by_column_blocks,
+)
 
 
 def _bank(rng, k, d, duplicates=0):
@@ -60,6 +65,23 @@ def test_nearest_rows_bounded_is_nearest_rows():
             )
         ties = bank[4046:4056]  # rows with an identical twin: answered by nearest_rows itself
         assert np.array_equal(nearest_rows_bounded(ties, bank, norms, index), nearest_rows(ties, bank, norms))
+
+
+def test_fallback_in_column_blocks_is_nearest_rows():
+    # 100 copies of row 10 in the last block of columns: more tied rows than the index keeps,
+    # so nearest_rows_bounded falls back to the exact search, one block of bank rows at a time
+    rng = np.random.default_rng(3)
+    bank = _bank(rng, 5000, 20)
+    bank[4900:] = bank[10]
+    norms = np.sum(bank * bank, axis=1)
+    noisy = bank[rng.integers(0, 5000, 300)] + 0.01 * rng.standard_normal((300, 20))
+    queries = np.concatenate([bank[[10, 4950]], noisy])  # two tiles of query rows
+    index = BoundedNearestIndex(bank, dims=8, extra=8)
+    with fixed_order():
+        expected = nearest_rows(queries, bank, norms)
+        assert np.array_equal(nearest_rows_by_column_blocks(queries, bank, norms), expected)
+        assert np.array_equal(nearest_rows_bounded(queries[:2], bank, norms, index), expected[:2])
+    assert expected[:2].tolist() == [10, 10]  # the lowest of the tied rows
 
 
 def _exemplar(size=64):

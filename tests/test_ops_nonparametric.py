@@ -250,3 +250,20 @@ def test_approximate_search_chooses_exact_candidates_mostly(colour_exemplar):
     alone, _, _ = _approximate_search_error(colour_exemplar, 7, (40, 40), k=0)
     assert np.mean(alone[:, 0] <= alone[:, 1] * 1.1 + 1e-10) < inside - 0.2  # the similar windows matter
     np.testing.assert_array_equal(values, colour_exemplar[source[..., 0], source[..., 1]])
+
+
+def test_match_in_blocks_is_match():
+    # more windows than one block (54 x 54 > 2048), values on a few levels: many exact ties
+    from texsyn.ops.linalg import fixed_order
+
+    rng = np.random.default_rng(4)
+    sampler = NonParametricSampler(np.round(rng.random((64, 64)) * 3) / 3, 11)
+    windows = np.round(rng.random((70, 11, 11, 1)) * 3) / 3
+    known = rng.random((70, 11, 11)) < 0.5
+    uniforms = rng.random(70)
+    with fixed_order():
+        source, error = sampler.match(windows, known, 0.1, uniforms)
+        blocked_source, blocked_error = sampler.match_in_blocks(windows, known, 0.1, uniforms)
+    assert np.array_equal(blocked_source, source)
+    assert np.array_equal(blocked_error.view(np.uint64), error.view(np.uint64))
+    assert len(np.unique(source, axis=0)) > 10  # the draws pick different windows

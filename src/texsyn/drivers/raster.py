@@ -814,8 +814,9 @@ class _ExactPass:
         members = slice(int(bounds[batch]), int(bounds[batch + 1]))
         pr, pc = rows[members], cols[members]
         windows, known = np.moveaxis(canvas.value_windows[pr, pc], 1, 3), canvas.known_windows[pr, pc]
-        if canvas.guide_windows is None:
-            src, err = sampler.match(windows, known, tolerance, uniforms[members])
+        if canvas.guide_windows is None:  # screened: the rare batch, in blocks of windows
+            match = sampler.match_in_blocks if self.screened else sampler.match
+            src, err = match(windows, known, tolerance, uniforms[members])
         else:
             guides = np.moveaxis(canvas.guide_windows[pr, pc], 1, 3)
             src, err = sampler.match_guided(windows, known, tolerance, uniforms[members], guides)

@@ -112,10 +112,9 @@ def nonparametric_bytes(
     ``screened``: the construction of a sampler that screens (a plain exemplar, as
     Efros-Leung's) holds the windows once (``8 K w^2 c``) and the float32 bounds'
     construction (``16 K n``), measured (``docs/memory.md``, "Second round"), instead of
-    ``24 K w^2 c``. Its growth counts both the chunks of bounds and a batch's full search:
-    a batch whose screen is not sure is searched whole while the chunks are kept
-    (:meth:`~texsyn.ops.nonparametric.NonParametricSampler.match_screened`); runs rarely
-    reach it, so a typical peak lies below the estimate by about that batch's search.
+    ``24 K w^2 c``. Its growth counts both the chunks of bounds and a batch's search: a
+    batch whose screen is not sure is searched while the chunks are kept, 2048 windows at a
+    time (:meth:`~texsyn.ops.nonparametric.NonParametricSampler.match_in_blocks`).
     """
     k = float(max(1, (h - window + 1) * (w - window + 1)))
     dim = float(window * window * c)
@@ -131,8 +130,16 @@ def nonparametric_bytes(
     cap = max(8, min(256, (1 << 23) // int(k)))
     batch = float(min(cap, max(8, (oh + ow) // (r + 1))))
     grow = padded * (8.0 * c + 33.0) + 16.0 * float(oh) * float(ow) + 64.0 * (oh + ow + 8 * r)
-    searches = batch * (48.0 * dim + 16.0 * k + 24.0 * window * window)
-    chunk = float(min(max(128, (1 << 22) // int(k)), oh + ow))  # at most about a pass
+    # a screened sampler searches its rare unsure batch 2048 windows at a time (match_in_blocks)
+    searched = 17.0 * min(k, 2048.0) if screened else 16.0 * k
+    searches = batch * (48.0 * dim + searched + 24.0 * window * window)
+    # the two buffers of bounds have room for a whole chunk, however short the passes are
+    # (texsyn.drivers.raster: screen_rows)
+    chunk = (
+        float(max(128, (1 << 22) // int(k)))
+        if screened
+        else float(min(max(128, (1 << 22) // int(k)), oh + ow))
+    )
     columns = -(-k // 2048) * 2048  # the bounds and their minima by blocks of 64
     bounds = 2.0 * chunk * (4.0625 * columns + 16.0 * screen + 8.0 * dim)
     grow += searches + bounds + 24.0 * k
@@ -162,7 +169,10 @@ def sparse_fit_bytes(
         n = n_atoms if k >= 2 * n_atoms else max(s + 1, int(k) // 2)
         atoms.append(n)
         t = min(k, float(ksvd_training))
-        ksvd = 64.0 * t * n + 24.0 * dim * t
+        # batch OMP's correlations, their working copy and the codes, the SVD updates'
+        # residuals: K-SVD alone peaks at 121 MiB (grey) and 153 MiB (colour) for T = 8000,
+        # n = 384, against 143 and 196 here (docs/memory.md, "Second round")
+        ksvd = 40.0 * t * n + 24.0 * dim * t
         pursuit = 17.0 * n * k + 130.0 * k
         peak = max(peak, kept + 8.0 * k * dim + max(8.0 * k * dim, ksvd, pursuit))
         kept += 8.0 * dim * n + 8.0 * k + 16.0 * sh * sw * c * (j > 0) + 8.0 * sh * sw * c

@@ -151,6 +151,10 @@ class Grouplets(TextureSynthesizer):
     summary = "Grouplet synthesis of oriented textures along a flow; fluid-driven animation (texsyn animate)"
     reference = "G. Peyré, Dynamic Texture Synthesis with Grouplets, MAPMO workshop 2008"
     has_source_map = False
+    #: the terms lie from 5 % below (128 -> 256 grey) to 3 % above (512 colour) the resident
+    #: peaks, Numba's arrays of the association fields included; 1.2 bounds them within 25 %
+    #: (``docs/memory.md``, "Second round")
+    memory_margin = 1.2
 
     def __init__(
         self,

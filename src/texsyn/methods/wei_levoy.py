@@ -50,6 +50,7 @@ import numpy as np
 from .._validation import OneOf, Range
 from ..drivers.coarse_to_fine import coarse_to_fine
 from ..errors import InputError
+from ..ops.linalg import BLOCK_COLUMNS
 from ..ops.patches import as_channels, gather_wrapped
 from ..ops.progress import Reporter
 from ..ops.search import (
@@ -63,7 +64,7 @@ from ..ops.tsvq import TSVQ
 from ..transforms.pyramids import gaussian_pyramid
 from ..transforms.steerable import pyramid_sizes
 from ._base import TextureSynthesizer
-from ._memory import output_bytes, pixel_count, shape_dims
+from ._memory import CALIBRATED_MARGIN, output_bytes, pixel_count, shape_dims
 
 __all__ = ["WeiLevoy", "causal_offsets", "TSVQ"]  # TSVQ: from texsyn.ops.tsvq, kept here for 0.1 users
 
@@ -140,6 +141,9 @@ class WeiLevoy(TextureSynthesizer):
     summary = "Wei-Levoy multiresolution synthesis with causal neighbourhoods"
     reference = "Wei, Levoy, SIGGRAPH 2000"
     has_source_map = True
+    #: the exact search's terms were checked against the measured peaks (``docs/memory.md``,
+    #: "Second round"); the TSVQ's were not and keep the default 1.25 (:meth:`memory_terms`)
+    memory_margin = CALIBRATED_MARGIN
     deprecated_params = {"random_state": "fit_rng"}
 
     def __init__(
@@ -204,6 +208,8 @@ class WeiLevoy(TextureSynthesizer):
         terms = {"exemplar pyramid and neighbourhood banks": kept}
         if output_shape is None:
             terms["bank construction"] = max(0.0, peak - kept)
+            if self.search != "exact":  # uncalibrated: the default margin of 1.25
+                return {key: value * 1.25 / CALIBRATED_MARGIN for key, value in terms.items()}
             return terms
         oh, ow = output_shape[:2]
         slope = self.window // 2 + 1
@@ -213,11 +219,20 @@ class WeiLevoy(TextureSynthesizer):
             n = float(min(sh, -(-sw // slope)))
             k = float(sizes[level][0] * sizes[level][1])
             search = 24.0 * n * k if self.search == "exact" else 0.0
+            if self.search == "exact" and k >= BOUNDED_SEARCH_ROWS:
+                # the proven search: two parts' candidates and float32 products a query, then
+                # at most the exact fallback, one block of bank rows at a time
+                # (texsyn.ops.search.nearest_rows_by_column_blocks)
+                search = n * (24.0 * min(k, BLOCK_COLUMNS) + 2.0 * (24.0 * 64 + 4.0 * 2048))
             front = max(front, 24.0 * n * dims[level] + 16.0 * n * max(causal, parent) + search)
         pixels = pixel_count(output_shape)
         terms["one wavefront of searches"] = front
-        terms["output pyramid and source maps"] = pixels * (4.0 / 3 * 8.0 * c + 16.0 * c + 56.0)
+        # the finest level's noise and its copy, its source, the coarser levels (a third of
+        # the pixels); then the image, its source and the source map (divmod, stacked)
+        terms["output pyramid and source maps"] = pixels * max((56.0 * c + 32.0) / 3, 8.0 * c + 40.0)
         terms["output image"] = output_bytes(c, output_shape)
+        if self.search != "exact":  # uncalibrated: the default margin of 1.25
+            return {key: value * 1.25 / CALIBRATED_MARGIN for key, value in terms.items()}
         return terms
 
     def _fit(self, exemplar: np.ndarray) -> None:

@@ -27,6 +27,7 @@ from collections.abc import Callable
 import numpy as np
 
 from .jit import jit
+from .linalg import BLOCK_COLUMNS
 from .patches import as_channels, extract_patches
 from .progress import Reporter
 from .search import WeightedPatchBank
@@ -220,6 +221,58 @@ class NonParametricSampler:
         choice, error = _pick_candidates(d, float(tolerance), uniforms)
         return self.centres[choice], error
 
+    def match_in_blocks(
+        self, windows: np.ndarray, known: np.ndarray, tolerance: float, uniforms: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`match`'s choice and error, with the distances of
+        :data:`~texsyn.ops.linalg.BLOCK_COLUMNS` exemplar windows at a time instead of all.
+
+        The blocks' distances are the same numbers as :meth:`match`'s
+        (:meth:`~texsyn.ops.search.WeightedPatchBank.distances` of whole tiles); a first pass
+        finds every window's smallest, a second counts the candidates within the threshold,
+        a third takes the one the uniform draw picks, in window order, as :meth:`match` does.
+        Three products instead of one, for the rare batch whose float32 screen is not sure
+        (:meth:`match_screened`); ``(k, BLOCK_COLUMNS)`` distances instead of ``(k, K)``
+        (``docs/memory.md``, "Second round").
+        """
+        n = self.n_windows
+        if self.guide_channels or n <= BLOCK_COLUMNS:
+            return self.match(windows, known, tolerance, uniforms)
+        k, channels = windows.shape[0], self.exemplar.shape[2]
+        weights = known * self.gauss
+        norm = weights.sum(axis=(1, 2))
+        full_w = np.broadcast_to(weights[..., None], weights.shape + (channels,)).reshape(k, -1)
+        queries = windows.reshape(k, -1)
+        starts = range(0, n, BLOCK_COLUMNS)
+
+        def block(start: int) -> np.ndarray:
+            d = self.bank.distances(queries, full_w, slice(start, start + BLOCK_COLUMNS))
+            d /= norm[:, None]
+            return d
+
+        best = np.full(k, np.inf)
+        for start in starts:
+            np.minimum(best, block(start).min(axis=1), out=best)
+        threshold = (best * (1.0 + float(tolerance)) + 1e-10)[:, None]
+        counts = np.zeros(k, dtype=np.int64)
+        for start in starts:
+            counts += np.count_nonzero(block(start) <= threshold, axis=1)
+        target = np.minimum((uniforms * counts).astype(np.int64), counts - 1)
+        choice = np.full(k, -1, dtype=np.int64)
+        error = np.empty(k)
+        seen = np.zeros(k, dtype=np.int64)
+        for start in starts:
+            d = block(start)
+            inside = d <= threshold
+            here = np.count_nonzero(inside, axis=1)
+            for i in np.flatnonzero((choice < 0) & (seen + here > target)):
+                j = np.flatnonzero(inside[i])[target[i] - seen[i]]
+                choice[i], error[i] = start + j, d[i, j]
+            seen += here
+            if np.all(choice >= 0):
+                break
+        return self.centres[choice], error
+
     def match_guided(
         self,
         windows: np.ndarray,
@@ -323,7 +376,7 @@ class NonParametricSampler:
         assert self._screen is not None, "a sampler with allowed windows does not screen"
         choice, error, sure = self._screen.choose(windows, known, tolerance, uniforms, screen, rows, accept)
         if not sure:
-            source, error = self.match(windows, known, tolerance, uniforms)
+            source, error = self.match_in_blocks(windows, known, tolerance, uniforms)
             return source, error, error <= accept
         return self.centres[choice], error, error <= accept
 

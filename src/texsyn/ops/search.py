@@ -43,6 +43,7 @@ __all__ = [
     "nearest_rows",
     "nearest_rows_band",
     "nearest_rows_bounded",
+    "nearest_rows_by_column_blocks",
 ]
 
 
@@ -203,18 +204,23 @@ class WeightedPatchBank:
         np.multiply(bank, bank, out=self._stacked[:, : self.dim])
         np.multiply(-2.0, bank, out=self._stacked[:, self.dim :])
 
-    def distances(self, queries: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    def distances(self, queries: np.ndarray, weights: np.ndarray, rows: slice | None = None) -> np.ndarray:
         """Distances of shape ``(Q, K)``, clamped at zero.
 
         Parameters
         ----------
         queries, weights : ndarray, shape (Q, D)
             Query vectors and their non-negative per-entry weights.
+        rows : slice, optional
+            Only these bank rows: ``(Q, len(rows))``. Starting at a multiple of
+            :data:`~texsyn.ops.linalg.BLOCK_COLUMNS` and that long, the values are those of
+            the full product's tiles (:func:`texsyn.ops.linalg.matmul`), the same bytes.
         """
         w = np.asarray(weights, dtype=np.float64)
         q = np.asarray(queries, dtype=np.float64)
         wq = w * q
-        d = matmul(np.concatenate([w, wq], axis=1), self._stacked.T)
+        stacked = self._stacked if rows is None else self._stacked[rows]
+        d = matmul(np.concatenate([w, wq], axis=1), stacked.T)
         d += np.sum(wq * q, axis=1)[:, None]
         return np.maximum(d, 0.0, out=d)
 
@@ -1155,15 +1161,15 @@ def bounded_index_bytes(rows: float, dim: int, *, dims: int = 32, extra: int = 3
     """``(kept, building)`` bytes of a :class:`BoundedNearestIndex` of ``rows`` rows of ``dim`` values.
 
     ``kept``: the float32 projections and next coordinates, the residual norms and the
-    basis (the bank itself is the caller's and not counted); ``building``: the centred copies
-    of the bank (the index's, then :meth:`~BoundedNearestIndex.isolated`'s), its coordinates
-    and their squares (``docs/memory.md``). A query of ``m`` rows adds a few ``m x dim``
+    basis (the bank itself is the caller's and not counted); ``building``: a centred copy of
+    the bank (the index's, freed before :meth:`~BoundedNearestIndex.isolated` makes its
+    own), its coordinates and their squares (``docs/memory.md``). A query of ``m`` rows adds a few ``m x dim``
     arrays and, per worker, ``m x chunk`` float32 products.
     """
     p = min(dims, dim)
     t = min(p + max(extra, 0), dim)
     kept = rows * (4.0 * (p + 1) + 4.0 * (t - p) + 16.0) + 8.0 * dim * (t + 1)
-    building = rows * (16.0 * dim + 24.0 * t + 12.0 * p + 48.0) + 8.0 * dim * dim
+    building = rows * (8.0 * dim + 24.0 * t + 12.0 * p + 48.0) + 8.0 * dim * dim
     return kept, building
 
 
@@ -1245,8 +1251,9 @@ def nearest_rows_bounded(
         best[rest] = found
         tied = np.flatnonzero(counts[:, 0] != 1)
         if tied.size:
-            if np.any(counts[tied, 0] > members.shape[1]):
-                return nearest_rows(queries, bank, bank_norm)
+            # more than one part's capacity: an overflow (capacity + 1), whatever the parts
+            if np.any(counts[tied, 0] > index.capacity):
+                return nearest_rows_by_column_blocks(queries, bank, bank_norm)
             best[rest[tied]] = _nearest_rows_among(
                 queries, bank, bank_norm, rest[tied], [members[t, : counts[t, 0]] for t in tied]
             )
@@ -1260,24 +1267,69 @@ def _nearest_rows_among(
 
     The values ``||b||^2 - 2 q . b`` of those bank rows are computed by the very products
     :func:`nearest_rows` makes (:func:`texsyn.ops.linalg.matmul`'s tiles of the whole block
-    of queries, only the tiles of columns that hold a candidate), so the smallest one, the
-    lowest row on a tie, is its answer.
+    of queries, only the tiles that hold a candidate, one column of tiles at a time), so the
+    smallest one, the lowest row on a tie, is its answer: the columns are visited in
+    ascending order and a later one wins only with a smaller value.
     """
     m, n = queries.shape[0], bank.shape[0]
     b = bank.T
-    columns = sorted({int(c) // BLOCK_COLUMNS for rows_ in among for c in rows_})
+    candidates = [np.sort(c) for c in among]
+    columns = sorted({int(c) // BLOCK_COLUMNS for rows_ in candidates for c in rows_})
+    tile_rows = sorted({int(i) // BLOCK_ROWS for i in rows})
+    out = np.full(len(rows), -1, dtype=np.int64)
+    best = np.full(len(rows), np.inf)
     with fixed_order():
-        if m <= BLOCK_ROWS and n <= BLOCK_COLUMNS:  # one tile: matmul makes one product
-            products = queries @ b
-        else:
-            products = np.empty((m, n))
-            for c in columns:
-                cols = slice(c * BLOCK_COLUMNS, (c + 1) * BLOCK_COLUMNS)
-                for r in range(0, m, BLOCK_ROWS):
-                    np.matmul(queries[r : r + BLOCK_ROWS], b[:, cols], out=products[r : r + BLOCK_ROWS, cols])
-    out = np.empty(len(rows), dtype=np.int64)
-    for k, (i, cand) in enumerate(zip(rows, among, strict=True)):
-        cand = np.sort(cand)
-        values = bank_norm[cand] - 2.0 * products[i, cand]
-        out[k] = cand[np.argmin(values)]
+        for c in columns:
+            start = c * BLOCK_COLUMNS
+            cols = slice(start, start + BLOCK_COLUMNS)
+            if m <= BLOCK_ROWS and n <= BLOCK_COLUMNS:  # one tile: matmul makes one product
+                products = queries @ b
+            else:
+                products = np.empty((m, min(n, start + BLOCK_COLUMNS) - start))
+                for t in tile_rows:
+                    r = t * BLOCK_ROWS
+                    np.matmul(queries[r : r + BLOCK_ROWS], b[:, cols], out=products[r : r + BLOCK_ROWS])
+            for k, (i, cand) in enumerate(zip(rows, candidates, strict=True)):
+                cand = cand[(cand >= start) & (cand < start + BLOCK_COLUMNS)]
+                if cand.size:
+                    values = bank_norm[cand] - 2.0 * products[i, cand - start]
+                    j = int(np.argmin(values))
+                    if out[k] < 0 or values[j] < best[k]:
+                        out[k], best[k] = cand[j], values[j]
     return out
+
+
+def nearest_rows_by_column_blocks(queries: np.ndarray, bank: np.ndarray, bank_norm: np.ndarray) -> np.ndarray:
+    """:func:`nearest_rows`, the same rows, holding the values of :data:`BLOCK_COLUMNS` bank
+    rows at a time instead of all of them.
+
+    Each block's values ``||b||^2 - 2 q . b`` come from the tiles :func:`nearest_rows`'s
+    product makes (:func:`texsyn.ops.linalg.matmul`: one single-thread product per tile of
+    :data:`BLOCK_ROWS` queries and :data:`BLOCK_COLUMNS` bank rows), so they are the same
+    numbers; a later block wins only with a strictly smaller value, so a tie goes to the
+    lowest row as :func:`numpy.argmin`'s does. One block at a time, on this thread (the
+    fallback of :func:`nearest_rows_bounded`, rare: exact ties beyond the index's members):
+    three ``(Q, BLOCK_COLUMNS)`` arrays, not ``(Q, K)`` (``docs/memory.md``, "Second round").
+    """
+    m, n = queries.shape[0], bank.shape[0]
+    if n <= BLOCK_COLUMNS:
+        return nearest_rows(queries, bank, bank_norm)
+
+    def block_minimum(start: int) -> tuple[np.ndarray, np.ndarray]:
+        stop = min(n, start + BLOCK_COLUMNS)
+        b = bank[start:stop].T
+        products = np.empty((m, stop - start))
+        for r in range(0, m, BLOCK_ROWS):  # matmul's tiles, on this worker
+            np.matmul(queries[r : r + BLOCK_ROWS], b, out=products[r : r + BLOCK_ROWS])
+        values = bank_norm[None, start:stop] - 2.0 * products
+        local = np.argmin(values, axis=1)
+        return local + start, values[np.arange(len(local)), local]
+
+    with fixed_order():
+        best, value = block_minimum(0)
+        for start in range(BLOCK_COLUMNS, n, BLOCK_COLUMNS):
+            rows_, values_ = block_minimum(start)
+            smaller = values_ < value
+            best = np.where(smaller, rows_, best)
+            value = np.where(smaller, values_, value)
+    return best
