@@ -145,6 +145,24 @@ def test_mslg_fit_estimate_bounds_its_traced_peak_with_the_highpass_histograms()
     assert peak <= method.estimate_memory(exemplar.shape) <= 1.25 * peak
 
 
+def test_efros_leung_on_a_tiny_exemplar_holds_bounds_for_its_canvas_only():
+    """4 exemplar windows once made the screen's buffers 2^20 rows (8 GB, 20 s) for 576 pixels."""
+    import tracemalloc
+
+    exemplar = np.random.default_rng(0).random((12, 12))
+    method = texsyn.make_method("efros_leung", window_size=11).fit(exemplar)
+    estimate = method.estimate_memory(exemplar.shape, (24, 24))
+    assert estimate < 64 * 2**20
+    method.sample((24, 24), rng=1)  # numba's kernels loaded first: the libraries' memory
+    tracemalloc.start()
+    try:
+        method.sample((24, 24), rng=0)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak <= estimate
+
+
 def test_estimates_follow_the_parameters_that_keep_arrays():
     ex = (128, 128, 3)
     assert texsyn.make_method("sparse", n_atoms=512).estimate_memory(ex) > texsyn.make_method(

@@ -768,7 +768,10 @@ class _ExactPass:
         # and each group of a chunk's product has rows enough to amortise the packing of
         # the bank (measured: 150 rows 4.1 s of CPU, 300 rows 3.6 s, the main thread 1.0
         # and 1.3 s; docs/methods/efros_leung.md, "Performance")
-        self.screen_rows = max(128, (1 << 22) // max(sampler.n_windows, 1))
+        # and never more rows than the canvas has pixels: the two buffers of bounds have room
+        # for a chunk (a 12x12 exemplar's 4 windows of 11x11 asked for 2^20 rows, 8 GB)
+        height, width = canvas.source.shape[:2]
+        self.screen_rows = min(max(128, (1 << 22) // max(sampler.n_windows, 1)), height * width)
         self.screened = sampler.screens
         self.buffers: list = [None, None]
 

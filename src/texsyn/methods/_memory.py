@@ -135,11 +135,10 @@ def nonparametric_bytes(
     searches = batch * (48.0 * dim + searched + 24.0 * window * window)
     # the two buffers of bounds have room for a whole chunk, however short the passes are
     # (texsyn.drivers.raster: screen_rows)
-    chunk = (
-        float(max(128, (1 << 22) // int(k)))
-        if screened
-        else float(min(max(128, (1 << 22) // int(k)), oh + ow))
-    )
+    # (never more rows than the canvas has pixels: texsyn.drivers.raster, _ExactPass)
+    chunk = min(float(max(128, (1 << 22) // int(k))), padded)
+    if not screened:
+        chunk = min(chunk, float(oh + ow))
     columns = -(-k // 2048) * 2048  # the bounds and their minima by blocks of 64
     bounds = 2.0 * chunk * (4.0625 * columns + 16.0 * screen + 8.0 * dim)
     grow += searches + bounds + 24.0 * k
