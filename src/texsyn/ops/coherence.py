@@ -23,7 +23,7 @@ from collections.abc import Iterator
 import numpy as np
 
 from .jit import jit
-from .nonparametric import NonParametricSampler
+from .nonparametric import NonParametricSampler, candidate_threshold
 
 __all__ = [
     "CoherentSampler",
@@ -55,7 +55,7 @@ def pick_within(d: np.ndarray, tolerance: float, uniforms: np.ndarray) -> np.nda
     [2]
     """
     best = d.min(axis=1)
-    inside = d <= (best * (1.0 + tolerance) + 1e-10)[:, None]
+    inside = d <= candidate_threshold(best, tolerance)[:, None]
     count = inside.sum(axis=1)
     target = np.minimum((uniforms * count).astype(np.int64), count - 1)
     return np.argmax(np.cumsum(inside, axis=1) > target[:, None], axis=1)

@@ -114,6 +114,13 @@ def _pick_candidates(d, tolerance, uniforms):
     return choice, error
 
 
+def candidate_threshold(best: np.ndarray, tolerance: float) -> np.ndarray:
+    """Efros and Leung's candidates of a window: distances at most this, ``(1 + tolerance)``
+    times the smallest plus ``1e-10`` (so that exact copies tie), for each row's ``best``
+    (``docs/methods/efros_leung.md``). The compiled pickers write the same rule inline."""
+    return best * (1.0 + float(tolerance)) + 1e-10
+
+
 class NonParametricSampler:
     """Everything region growing needs from an exemplar, built once (in a method's ``fit``).
 
@@ -253,7 +260,7 @@ class NonParametricSampler:
         best = np.full(k, np.inf)
         for start in starts:
             np.minimum(best, block(start).min(axis=1), out=best)
-        threshold = (best * (1.0 + float(tolerance)) + 1e-10)[:, None]
+        threshold = candidate_threshold(best, tolerance)[:, None]
         counts = np.zeros(k, dtype=np.int64)
         for start in starts:
             counts += np.count_nonzero(block(start) <= threshold, axis=1)
@@ -265,9 +272,10 @@ class NonParametricSampler:
             d = block(start)
             inside = d <= threshold
             here = np.count_nonzero(inside, axis=1)
-            for i in np.flatnonzero((choice < 0) & (seen + here > target)):
-                j = np.flatnonzero(inside[i])[target[i] - seen[i]]
-                choice[i], error[i] = start + j, d[i, j]
+            rows = np.flatnonzero((choice < 0) & (seen + here > target))
+            if rows.size:  # the (target - seen)-th candidate of this block, in window order
+                j = np.argmax(np.cumsum(inside[rows], axis=1) > (target - seen)[rows, None], axis=1)
+                choice[rows], error[rows] = start + j, d[rows, j]
             seen += here
             if np.all(choice >= 0):
                 break
