@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 
+import numpy as np
 import pytest
 
 from texsyn.ops import linalg
@@ -51,3 +53,23 @@ def test_a_later_items_error_waits_for_the_running_items(monkeypatch):
     with pytest.raises(ValueError, match="item 1"):
         linalg.parallel_map(item, range(3))
     assert finished == [2]  # awaited: nothing of the call left writing after its error
+
+
+def test_a_map_inside_a_map_runs_in_the_pools_thread_without_deadlock(monkeypatch):
+    """Every worker mapping again used to wait for work queued behind itself (a deadlock)."""
+    monkeypatch.setattr(linalg, "worker_count", lambda: 2)
+    rng = np.random.default_rng(0)
+    a, b = rng.standard_normal((300, 64)), rng.standard_normal((64, 700))
+
+    def outer(i: int) -> tuple[list[int], np.ndarray]:
+        inner = linalg.parallel_map(lambda j: 10 * i + j, range(4))
+        return inner, linalg.matmul(a, b)
+
+    pool = ThreadPoolExecutor(max_workers=1)  # the test's own guard against a hang
+    try:
+        results = pool.submit(linalg.parallel_map, outer, range(6)).result(timeout=30)
+    finally:
+        pool.shutdown(wait=False)
+    assert [inner for inner, _ in results] == [[10 * i + j for j in range(4)] for i in range(6)]
+    reference = linalg.matmul(a, b)
+    assert all(np.array_equal(product, reference) for _, product in results)

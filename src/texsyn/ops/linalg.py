@@ -165,9 +165,13 @@ def parallel_map(function: Callable, items) -> list:
     is the first failing item's in item order, as in the loop; before it is raised, the
     items not started are cancelled and the running ones awaited (no work of the call goes
     on writing into the caller's arrays behind its exception).
+
+    Called from one of the pool's own threads (``function`` itself mapping, or a
+    :func:`matmul` inside it), the items run in that thread, one after the other: waiting on
+    the pool from inside it could leave every worker waiting for work queued behind itself.
     """
     items = list(items)
-    if len(items) <= 1 or worker_count() == 1:
+    if len(items) <= 1 or worker_count() == 1 or _on_pool_thread():
         return [function(item) for item in items]
     pool = _thread_pool()
     rest = [pool.submit(function, item) for item in items[1:]]
@@ -185,8 +189,23 @@ def _thread_pool() -> ThreadPoolExecutor:
     global _pool
     with _pool_lock:
         if _pool is None:
-            _pool = ThreadPoolExecutor(max_workers=worker_count(), thread_name_prefix="texsyn-matmul")
+            _pool = ThreadPoolExecutor(
+                max_workers=worker_count(), thread_name_prefix="texsyn-matmul", initializer=_mark_pool_thread
+            )
         return _pool
+
+
+#: set in the pool's own threads (:func:`_mark_pool_thread`)
+_pool_thread = threading.local()
+
+
+def _mark_pool_thread() -> None:
+    _pool_thread.inside = True
+
+
+def _on_pool_thread() -> bool:
+    """Whether the calling thread is one of the pool's: a map from it runs in it (no nesting)."""
+    return getattr(_pool_thread, "inside", False)
 
 
 def matmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -230,7 +249,7 @@ def matmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
                     np.matmul(a[rows], b[:, cols], out=out[rows, cols])
 
         workers = min(worker_count(), len(tiles)) if m * k * n >= _PARALLEL_MIN_WORK else 1
-        if workers == 1:
+        if workers == 1 or _on_pool_thread():  # (inside the pool: no nested map, parallel_map)
             run(tiles)
         else:
             list(_thread_pool().map(run, [tiles[i::workers] for i in range(workers)]))
