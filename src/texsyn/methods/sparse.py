@@ -297,9 +297,17 @@ class ConstrainedSparse(TextureSynthesizer):
         pixels = float(canvas[0]) * canvas[1]
         patches = pixels / (self.step * self.step)
         terms["image, gradient and histogram targets"] = pixels * (56.0 * c + 16.0) + 8.0 * n * n
-        pursuit = 8.0 * patches * dim + 17.0 * n * patches + 130.0 * patches
+        # the pursuit runs while the previous iteration's codes and coded patches are still
+        # referenced (8 n + 8 dim bytes a patch): the traced peak of 128 -> 256 grey
+        pursuit = 16.0 * patches * dim + 25.0 * n * patches + 130.0 * patches
         reassembly = 16.0 * patches * dim + 8.0 * n * patches + 80.0 * c * pixels
         terms["patch codes and reassembly"] = max(pursuit, reassembly)
+        # the pursuit's n x K float64 arrays (correlations, their rows, codes: NumPy's and
+        # Numba's, the same sizes every iteration) leave the heap fragmented: a model loaded
+        # in a fresh process grows the resident set by 2.6 to 3.3 of them more than the
+        # traced peak (48 MiB against 29, 128 -> 256 grey); two counted, the margin covers
+        # the rest (docs/memory.md, "Every method at its defaults")
+        terms["fragmented heap of the pursuit"] = 16.0 * n * patches
         terms["output image"] = output_bytes(c, output_shape) + 16.0 * c * pixel_count(output_shape)
         return terms
 
