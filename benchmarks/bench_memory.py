@@ -33,6 +33,7 @@ from __future__ import annotations
 import ctypes
 import gc
 import json
+import os
 import subprocess
 import sys
 import time
@@ -307,12 +308,17 @@ def main(argv: list[str] | None = None) -> int:
     print(machine())
     print("\n".join(HEADER), flush=True)
     rows = []
+    # the workers run in benchmarks/: a relative PYTHONPATH (PYTHONPATH=src) is made absolute,
+    # or they would import the installed texsyn instead of this checkout's
+    paths = os.environ.get("PYTHONPATH", "").split(os.pathsep)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(str(Path(x).resolve()) for x in paths if x)}
     for spec in specs:
         done = subprocess.run(
             [sys.executable, __file__, "--worker", json.dumps(spec)],
             capture_output=True,
             text=True,
             cwd=Path(__file__).parent,
+            env=env,
         )
         if done.returncode != 0:
             lines = done.stderr.strip().splitlines() or ["no output"]

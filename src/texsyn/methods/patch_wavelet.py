@@ -513,8 +513,8 @@ class PatchWavelet(TextureSynthesizer):
             if built + bank + index + build > sum(during.values()):
                 during = {
                     "patch indexes built before the largest build": built,
-                    "the largest build's patch index and float64 descriptors": bank + index,
-                    "the largest build's temporaries": build,
+                    "patch indexes: the largest build's index and float64 descriptors": bank + index,
+                    "patch indexes: the largest build's temporaries": build,
                 }
             if width in fast:
                 built += bank + bounded_index_bytes(k, d)[0] + k

@@ -281,7 +281,8 @@ class ConstrainedSparse(TextureSynthesizer):
         Fitting holds all ``K`` exemplar patches of the finest scale (``K x tau^2 C`` floats),
         K-SVD's batch OMP on ``ksvd_training`` of them and the constrained matching pursuit
         of all of them (``n_atoms x K`` correlations and codes); sampling holds the codes of
-        the output patches and the graph-cut reassembly (``docs/memory.md``).
+        the output patches or the graph-cut reassembly, and the heap the pursuit leaves
+        fragmented (``docs/memory.md``, "Every method at its defaults").
         """
         h, w, c = shape_dims(exemplar_shape)
         dim = self.patch_size * self.patch_size * c
