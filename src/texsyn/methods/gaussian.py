@@ -94,7 +94,8 @@ class _LocalGaussianBase(TextureSynthesizer):
     streams_rows = _StreamsWithoutMatching()  # type: ignore[assignment]
     #: the terms count the traced peak within 2 %; the resident set of these runs of a few MiB
     #: holds 1 to 1.6 MiB more (the heap the loop's many small FFT temporaries leave behind),
-    #: up to 20 % of a 128 -> 256 colour run (``docs/memory.md``, "Every method at its defaults")
+    #: up to 20 % of a 128 -> 256 colour run (``docs/memory.md``, "Every method at its
+    #: defaults")
     memory_margin = 1.15
     _model = "lg"
     # set by each subclass's __init__ (its signature is the parameter list)
@@ -159,8 +160,9 @@ class _LocalGaussianBase(TextureSynthesizer):
             # after the loop (its canvas and searches freed): the loop's output, the matched
             # channels before the one being matched, that channel's contiguous copy and
             # hist_target's quantiles (41 bytes a pixel: positions, indices and their
-            # gathers), 128 -> 512 grey 14.8 MiB traced, 14.6 counted (docs/memory.md,
-            # "Every method at its defaults"); the output's copies come later and take less (20 C bytes a pixel)
+            # gathers), 128 -> 512 grey 14.8 MiB traced, 14.6 counted (docs/memory.md, "Every
+            # method at its defaults"); the output's copies come later and take less (20 C
+            # bytes a pixel)
             terms["canvas and one search, or the matched marginals (larger)"] = max(
                 blocks + search, (16.0 * c + 41.0) * pixel_count(output_shape)
             )

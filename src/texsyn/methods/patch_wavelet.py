@@ -494,7 +494,8 @@ class PatchWavelet(TextureSynthesizer):
         allocator keeps its float64 temporaries resident where each is under glibc's 32 MiB
         mmap threshold: the coordinates and their squares (``16 K t``) and the centred copy of
         the bank (``8 K D``, when under 32 MiB); the resident peak can come at the end, with
-        every width kept. The LLE embeddings are built last (``docs/memory.md``, "Every method at its defaults").
+        every width kept. The LLE embeddings are built last (``docs/memory.md``, "Every
+        method at its defaults").
         """
         h, w, _ = shape_dims(exemplar_shape)
         k = float(h * w)

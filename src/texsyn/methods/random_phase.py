@@ -102,8 +102,8 @@ class RandomPhase(TextureSynthesizer):
         # phase, the inverse's complex intermediate and the result (8 C bytes each: the
         # spectra are half-size complex); the noise's spectrum, its modulus and the phase
         # (8 + 4 + 8) are still referenced (128 -> 512 colour: 35.8 MiB traced, 35.0 counted;
-        # docs/memory.md, "Every method at its defaults"). The spectra are freed before the output is
-        # cropped, shifted and converted
+        # docs/memory.md, "Every method at its defaults"). The spectra are freed before the
+        # output is cropped, shifted and converted
         terms["embedded spot, spectra and phase"] = max(
             canvas * (40.0 * c + 20.0), 8.0 * c * pixel_count(output_shape) + output_bytes(c, output_shape)
         )
