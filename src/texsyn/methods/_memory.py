@@ -106,8 +106,8 @@ def nonparametric_bytes(
     squares); otherwise that of growing a texture of that size: the padded canvas, its masks,
     one batch of searches, whose size is bounded by the length of the growing front, and two
     chunks of float32 lower bounds (``2 x 4 K'`` bytes a row, ``K'`` the window count rounded
-    up to 2048, ``max(128, 2^22 / K)`` rows or about a pass, whichever is shorter;
-    ``docs/methods/efros_leung.md``).
+    up to 2048, ``max(128, 2^22 / K)`` rows or about a pass, whichever is shorter; one chunk
+    when a screened sampler's passes fit in one; ``docs/methods/efros_leung.md``).
 
     ``screened``: the construction of a sampler that screens (a plain exemplar, as
     Efros-Leung's) holds the windows once (``8 K w^2 c``) and the float32 bounds'
@@ -129,18 +129,27 @@ def nonparametric_bytes(
     padded = float(oh + 2 * r) * float(ow + 2 * r)
     cap = max(8, min(256, (1 << 23) // int(k)))
     batch = float(min(cap, max(8, (oh + ow) // (r + 1))))
-    grow = padded * (8.0 * c + 33.0) + 16.0 * float(oh) * float(ow) + 64.0 * (oh + ow + 8 * r)
+    if screened:  # the padded values and mask, the front's mask and the int64 source map
+        grow = padded * (8.0 * c + 2.0) + 17.0 * float(oh) * float(ow) + 64.0 * (oh + ow + 8 * r)
+    else:
+        grow = padded * (8.0 * c + 33.0) + 16.0 * float(oh) * float(ow) + 64.0 * (oh + ow + 8 * r)
     # a screened sampler searches its rare unsure batch 2048 windows at a time (match_in_blocks)
     searched = 17.0 * min(k, 2048.0) if screened else 16.0 * k
     searches = batch * (48.0 * dim + searched + 24.0 * window * window)
-    # the two buffers of bounds have room for a whole chunk, however short the passes are
-    # (texsyn.drivers.raster: screen_rows)
-    # (never more rows than the canvas has pixels: texsyn.drivers.raster, _ExactPass)
+    # a buffer of bounds has room for a whole chunk, however short the passes are, and never
+    # more rows than the output has pixels (texsyn.drivers.raster._ExactPass: screen_rows)
     chunk = min(float(max(128, (1 << 22) // int(k))), padded)
-    if not screened:
+    buffers = 2.0
+    if screened:
+        chunk = min(chunk, float(oh) * float(ow))
+        # the second buffer is made for a pass of more pixels than a chunk: a pass is the
+        # growing front, at most 2 (oh + ow) pixels (measured), counted twice for the pixels
+        # a pass leaves unfilled (docs/memory.md, "Every method at its defaults")
+        buffers = 1.0 if 4.0 * (oh + ow) <= chunk else 2.0
+    else:
         chunk = min(chunk, float(oh + ow))
     columns = -(-k // 2048) * 2048  # the bounds and their minima by blocks of 64
-    bounds = 2.0 * chunk * (4.0625 * columns + 16.0 * screen + 8.0 * dim)
+    bounds = buffers * chunk * (4.0625 * columns + 16.0 * screen + 8.0 * dim)
     grow += searches + bounds + 24.0 * k
     return kept, grow
 

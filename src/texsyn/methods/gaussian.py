@@ -42,7 +42,7 @@ from ..ops.linalg import fixed_order
 from ..ops.patches import as_channels
 from ..ops.progress import Reporter
 from ._base import TextureSynthesizer
-from ._memory import CALIBRATED_MARGIN, fft_search_terms, output_bytes, pixel_count, shape_dims
+from ._memory import fft_search_terms, output_bytes, pixel_count, shape_dims
 from ._params import ParamSpec
 from .multiscale_gaussian import MSLG, ZOOM_SIGMA  # noqa: F401  (round 1 imported ZOOM_SIGMA from here)
 from .single_scale_gaussian import (
@@ -92,7 +92,11 @@ class _LocalGaussianBase(TextureSynthesizer):
     max_channels = 16
     #: only ``histogram='none'`` streams; the class itself says no (its default is ``'match'``)
     streams_rows = _StreamsWithoutMatching()  # type: ignore[assignment]
-    memory_margin = CALIBRATED_MARGIN
+    #: the terms count the traced peak within 2 %; the resident set of these runs of a few MiB
+    #: holds 1 to 1.6 MiB more (the heap the loop's many small FFT temporaries leave behind),
+    #: up to 20 % of a 128 -> 256 colour run (``docs/memory.md``, "Every method at its
+    #: defaults")
+    memory_margin = 1.15
     _model = "lg"
     # set by each subclass's __init__ (its signature is the parameter list)
     patch_size: int
@@ -150,14 +154,21 @@ class _LocalGaussianBase(TextureSynthesizer):
         canvas = block_canvas(output_shape[:2], n, n - self._overlap_px())
         m = min(self.n_neighbors, max(1, (h - n + 1) * (w - n + 1)))
         # the search's transients are freed before the neighbours are gathered
-        terms["one search or one local Gaussian"] = max(query, local_gaussian_bytes(m, n * n * c))
-        terms["canvas"] = float(canvas[0]) * canvas[1] * (8.0 * c + 1.0)
+        search = max(query, local_gaussian_bytes(m, n * n * c))
+        blocks = float(canvas[0]) * canvas[1] * (8.0 * c + 1.0)
         if self.histogram == "match":
-            # the matched channels and their stack, and one channel's ranks, while the canvas
-            # is alive; the output's copies come after the canvas is freed and take less
-            # (20 C bytes a pixel)
-            terms["matched marginals"] = (16.0 * c + 8.0) * pixel_count(output_shape)
+            # after the loop (its canvas and searches freed): the loop's output, the matched
+            # channels before the one being matched, that channel's contiguous copy and
+            # hist_target's quantiles (41 bytes a pixel: positions, indices and their
+            # gathers), 128 -> 512 grey 14.8 MiB traced, 14.6 counted (docs/memory.md, "Every
+            # method at its defaults"); the output's copies come later and take less (20 C
+            # bytes a pixel)
+            terms["canvas and one search, or the matched marginals (larger)"] = max(
+                blocks + search, (16.0 * c + 41.0) * pixel_count(output_shape)
+            )
         else:
+            terms["one search or one local Gaussian"] = search
+            terms["canvas"] = blocks
             terms["output image"] = output_bytes(c, output_shape)
         return terms
 

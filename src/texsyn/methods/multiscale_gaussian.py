@@ -223,9 +223,11 @@ class MSLG(TextureSynthesizer):
         _, _, query = fft_search_bytes(hc, wc, 2 * c if self.n_scales > 1 else c, masks=9)
         search = max(query, local_gaussian_bytes(m, n * n * c))
         # the zoom-in (symmetric: the mirror extension's spectrum, the zero-padded spectrum of
-        # four times its size, whose written quarter only is resident, its shifted copy and
-        # the inverse transform's two passes) is over before the finest scale is synthesised
-        zoom = (264.0 if self.zoom_boundary == "symmetric" else 48.0) * c * canvas
+        # four times its size, its shifted copy and the inverse transform's two passes;
+        # tracemalloc counts the whole zero-padded spectrum, the resident set only its written
+        # quarter: 280 and 68 bytes a value traced, docs/memory.md, "Every method at its
+        # defaults") is over before the finest scale is synthesised
+        zoom = (280.0 if self.zoom_boundary == "symmetric" else 68.0) * c * canvas
         synthesis = canvas * (16.0 * c + 1.0) + output_bytes(c, output_shape)
         if self._matches_highpass():
             synthesis += 64.0 * c * canvas  # the high-pass residual and its histogram

@@ -141,6 +141,10 @@ class PatchWavelet(TextureSynthesizer):
     )
     deprecated_params = {"random_state": "fit_rng"}
     has_source_map = True
+    #: the terms follow the build order and the allocator's resident temporaries (:meth:`_fit_terms`);
+    #: 10 % covers the resident set's excess over the traced peaks (up to 5 %, ``docs/memory.md``,
+    #: "Every method at its defaults")
+    memory_margin = 1.1
 
     def __init__(
         self,
@@ -481,6 +485,49 @@ class PatchWavelet(TextureSynthesizer):
             terms["embeddings"] = sum(self._embedding_bytes(k, dims[width])[0] for width in noisy)
         return terms
 
+    def _fit_terms(self, exemplar_shape) -> dict[str, float]:
+        """The fit's peak, width after width as :class:`PatchWaveletTransform` builds them.
+
+        Each width's index (and, for a fast width, its float64 descriptors and the build of
+        its bounded index) is made while only the widths before it exist, so a build's
+        transients meet those widths, not the ones after it. After a fast search's build the
+        allocator keeps its float64 temporaries resident where each is under glibc's 32 MiB
+        mmap threshold: the coordinates and their squares (``16 K t``) and the centred copy of
+        the bank (``8 K D``, when under 32 MiB); the resident peak can come at the end, with
+        every width kept. The LLE embeddings are built last (``docs/memory.md``, "Every
+        method at its defaults").
+        """
+        h, w, _ = shape_dims(exemplar_shape)
+        k = float(h * w)
+        model = self._model_terms(exemplar_shape)
+        dims = self._width_dims(exemplar_shape)
+        fast = self._fast_widths(exemplar_shape)
+        built = model["extended exemplar and block means"]
+        during: dict[str, float] = {}
+        resident = 0.0
+        for width in sorted(dims):
+            d = dims[width]
+            index = 4.0 * k * d + 4.0 * k
+            part = 8.0 * max(2.0**18, w * d) + 24.0 * k  # one part of the index's descriptors
+            bank = 8.0 * k * d if width in fast else 0.0
+            build = max(part, bounded_index_bytes(k, d)[1]) if width in fast else part
+            if built + bank + index + build > sum(during.values()):
+                during = {
+                    "patch indexes built before the largest build": built,
+                    "patch indexes: the largest build's index and float64 descriptors": bank + index,
+                    "patch indexes: the largest build's temporaries": build,
+                }
+            if width in fast:
+                built += bank + bounded_index_bytes(k, d)[0] + k
+                t = min(64, d)  # BoundedNearestIndex's coordinates: dims + extra
+                resident = max(resident, 16.0 * k * t + (bank if bank < 2.0**25 else 0.0))
+            built += index
+        noisy = self._noisy_widths(exemplar_shape)
+        last = max([resident] + [self._embedding_bytes(k, dims[width])[1] for width in noisy])
+        if sum(model.values()) + last > sum(during.values()):
+            return {**model, "build temporaries kept resident, or an embedding's build": last}
+        return during
+
     def _build_bytes(self, exemplar_shape) -> float:
         """Largest transient of the fit: one part of an index's descriptors, a fast search's
         bounded index, or an LLE embedding (the indexes are built a few rows at a time,
@@ -543,10 +590,9 @@ class PatchWavelet(TextureSynthesizer):
         ``N >= max(h, w)`` and searches in chunks (``docs/memory.md``).
         """
         _, _, c = shape_dims(exemplar_shape)
-        terms = self._model_terms(exemplar_shape)
         if output_shape is None:
-            terms["float64 descriptors while building the patch indexes"] = self._build_bytes(exemplar_shape)
-            return terms
+            return self._fit_terms(exemplar_shape)
+        terms = self._model_terms(exemplar_shape)
         oh, ow = output_shape[:2]
         n = float(power_of_two_canvas((oh, ow), minimum=4, square=True)[0])
         grid = n * n

@@ -335,18 +335,21 @@ class PortillaSimoncelli(TextureSynthesizer):
         An empirical model of the analysis and of one iteration of the projections, fitted
         to the measured peaks (resident growth and ``tracemalloc``, 128x128 exemplars, grey
         and colour, 256x256 and 512x512 outputs; ``benchmarks/memory.md``): about
-        ``500 + 380 C`` bytes per exemplar pixel and ``220 + 300 C`` per output pixel with
-        the default four orientations (``C`` the channels synthesised together).
+        ``600 + 400 C`` bytes per exemplar pixel for the fit, and for sampling ``150`` per
+        exemplar pixel (the statistics' targets) and ``220 + 300 C`` per output pixel with
+        the default four orientations (``C`` the channels synthesised together;
+        ``docs/memory.md``, "Every method at its defaults").
         """
         h, w, c = shape_dims(exemplar_shape)
         k = float(h * w)
         channels = 3 if c == 3 and self.colour != "grey" else 1
         terms = {"exemplar": 16.0 * k * c}
         if output_shape is None:
-            terms["analysis of the exemplar"] = k * (500.0 + channels * (60.0 + 80.0 * self.n_orientations))
+            terms["analysis of the exemplar"] = k * (600.0 + channels * (80.0 + 80.0 * self.n_orientations))
             return terms
         ch, cw = self._canvas(output_shape)
         canvas = float(ch) * float(cw)
+        terms["statistics' targets"] = 150.0 * k
         terms["pyramids of one iteration"] = canvas * (220.0 + channels * (60.0 + 60.0 * self.n_orientations))
         terms["output image"] = output_bytes(c, output_shape)
         return terms

@@ -99,12 +99,13 @@ class RandomPhase(TextureSynthesizer):
         rows, cols = padded_canvas(output_shape, minimum=(h, w))
         canvas = float(rows) * float(cols)
         # at the inverse transform: the embedded spot, its spectrum, their product with the
-        # phase and the result (8 C bytes each: the spectra are half-size complex), the
-        # noise's spectrum and the phase; the noise itself and the modulus are freed by then
-        # (128 -> 1024 colour: 125 MiB measured, 120 MiB counted). The spectra are freed
-        # before the output is cropped, shifted and converted
+        # phase, the inverse's complex intermediate and the result (8 C bytes each: the
+        # spectra are half-size complex); the noise's spectrum, its modulus and the phase
+        # (8 + 4 + 8) are still referenced (128 -> 512 colour: 35.8 MiB traced, 35.0 counted;
+        # docs/memory.md, "Every method at its defaults"). The spectra are freed before the
+        # output is cropped, shifted and converted
         terms["embedded spot, spectra and phase"] = max(
-            canvas * (32.0 * c + 24.0), 8.0 * c * pixel_count(output_shape) + output_bytes(c, output_shape)
+            canvas * (40.0 * c + 20.0), 8.0 * c * pixel_count(output_shape) + output_bytes(c, output_shape)
         )
         return terms
 

@@ -281,7 +281,8 @@ class ConstrainedSparse(TextureSynthesizer):
         Fitting holds all ``K`` exemplar patches of the finest scale (``K x tau^2 C`` floats),
         K-SVD's batch OMP on ``ksvd_training`` of them and the constrained matching pursuit
         of all of them (``n_atoms x K`` correlations and codes); sampling holds the codes of
-        the output patches and the graph-cut reassembly (``docs/memory.md``).
+        the output patches or the graph-cut reassembly, and the heap the pursuit leaves
+        fragmented (``docs/memory.md``, "Every method at its defaults").
         """
         h, w, c = shape_dims(exemplar_shape)
         dim = self.patch_size * self.patch_size * c
@@ -297,9 +298,17 @@ class ConstrainedSparse(TextureSynthesizer):
         pixels = float(canvas[0]) * canvas[1]
         patches = pixels / (self.step * self.step)
         terms["image, gradient and histogram targets"] = pixels * (56.0 * c + 16.0) + 8.0 * n * n
-        pursuit = 8.0 * patches * dim + 17.0 * n * patches + 130.0 * patches
+        # the pursuit runs while the previous iteration's codes and coded patches are still
+        # referenced (8 n + 8 dim bytes a patch): the traced peak of 128 -> 256 grey
+        pursuit = 16.0 * patches * dim + 25.0 * n * patches + 130.0 * patches
         reassembly = 16.0 * patches * dim + 8.0 * n * patches + 80.0 * c * pixels
         terms["patch codes and reassembly"] = max(pursuit, reassembly)
+        # the pursuit's n x K float64 arrays (correlations, their rows, codes: NumPy's and
+        # Numba's, the same sizes every iteration) leave the heap fragmented: a model loaded
+        # in a fresh process grows the resident set by 2.6 to 3.3 of them more than the
+        # traced peak (48 MiB against 29, 128 -> 256 grey); two counted, the margin covers
+        # the rest (docs/memory.md, "Every method at its defaults")
+        terms["fragmented heap of the pursuit"] = 16.0 * n * patches
         terms["output image"] = output_bytes(c, output_shape) + 16.0 * c * pixel_count(output_shape)
         return terms
 
