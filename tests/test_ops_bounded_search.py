@@ -101,6 +101,7 @@ def test_wei_levoy_proven_search_gives_the_plain_search_bytes(monkeypatch, worke
     fast = texsyn.make_method("wei_levoy", **params).fit(ex)
     assert fast.indexes_[0] is not None  # 64 x 64 = 4096 rows: the proven search is used
     monkeypatch.setattr(search, "worker_count", lambda: workers)  # parts of the bank per query
+    monkeypatch.setattr(search, "PARALLEL_PAIRS", 0)  # however few the queries of a wavefront
     got = fast.sample_with_map((72, 80), rng=3)
     monkeypatch.setattr(wl, "BOUNDED_SEARCH_ROWS", 10**9)
     plain = texsyn.make_method("wei_levoy", **params).fit(ex)

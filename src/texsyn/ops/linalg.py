@@ -61,6 +61,9 @@ _depth = 0
 _saved: list = []
 _pool: ThreadPoolExecutor | None = None
 _pool_lock = threading.Lock()
+#: :func:`parallel_map`'s helper threads (one call at a time uses them: ``_helpers_lock``)
+_helpers: list = []
+_helpers_lock = threading.Lock()
 
 F = TypeVar("F", bound=Callable)
 
@@ -167,8 +170,14 @@ def parallel_map(function: Callable, items) -> list:
     on writing into the caller's arrays behind its exception).
     """
     items = list(items)
-    if len(items) <= 1 or worker_count() == 1:
+    workers = worker_count()
+    if len(items) <= 1 or workers == 1:
         return [function(item) for item in items]
+    if len(items) <= workers and _helpers_lock.acquire(blocking=False):
+        try:  # one item per thread: the helpers' hand-over, cheaper than the pool's futures
+            return _on_helpers(function, items)
+        finally:
+            _helpers_lock.release()
     pool = _thread_pool()
     rest = [pool.submit(function, item) for item in items[1:]]
     try:
@@ -179,6 +188,59 @@ def parallel_map(function: Callable, items) -> list:
             future.cancel()
         wait(rest)
         raise
+
+
+class _Helper:
+    """A thread that runs one item at a time for :func:`parallel_map`, handed over by two locks
+    (a wait on a lock releases the GIL; no future, no queue: about 10 µs a hand-over against
+    the pool's 70 on a 2-core virtual machine, once per wavefront in Wei and Levoy's search)."""
+
+    def __init__(self) -> None:
+        self._go = threading.Lock()
+        self._go.acquire()
+        self._done = threading.Lock()
+        self._done.acquire()
+        self._job: tuple[Callable, object] | None = None
+        self._result: tuple[bool, object] = (True, None)
+        threading.Thread(target=self._serve, name="texsyn-helper", daemon=True).start()
+
+    def _serve(self) -> None:
+        while True:
+            self._go.acquire()
+            function, item = self._job  # type: ignore[misc]
+            try:
+                self._result = (True, function(item))
+            except BaseException as error:  # handed to the caller
+                self._result = (False, error)
+            self._job = None
+            self._done.release()
+
+    def start(self, function: Callable, item: object) -> None:
+        self._job = (function, item)
+        self._go.release()
+
+    def finish(self) -> tuple[bool, object]:
+        self._done.acquire()
+        result, self._result = self._result, (True, None)
+        return result
+
+
+def _on_helpers(function: Callable, items: list) -> list:
+    """:func:`parallel_map` of at most one item per worker: the caller computes the first item,
+    a helper thread each other one; every item is awaited before an error is raised."""
+    while len(_helpers) < len(items) - 1:
+        _helpers.append(_Helper())
+    for helper, item in zip(_helpers, items[1:]):
+        helper.start(function, item)
+    try:
+        first: tuple[bool, object] = (True, function(items[0]))
+    except BaseException as error:
+        first = (False, error)
+    results = [first] + [helper.finish() for helper in _helpers[: len(items) - 1]]
+    for ok, value in results:
+        if not ok:
+            raise value  # type: ignore[misc]
+    return [value for _, value in results]
 
 
 def _thread_pool() -> ThreadPoolExecutor:
@@ -239,10 +301,12 @@ def matmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def _reset_after_fork() -> None:
     """In a forked child the pool's threads do not exist: start a new pool and new locks."""
-    global _pool, _lock, _pool_lock
+    global _pool, _lock, _pool_lock, _helpers, _helpers_lock
     _pool = None
     _lock = threading.Lock()
     _pool_lock = threading.Lock()
+    _helpers = []
+    _helpers_lock = threading.Lock()
 
 
 if hasattr(os, "register_at_fork"):

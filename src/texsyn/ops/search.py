@@ -538,6 +538,11 @@ class NearestPatchIndex:
 #: unit roundoff of float64 and float32
 _U64 = 2.0**-53
 _U32 = 2.0**-24
+#: (query, bank row) pairs of a block below which :class:`BoundedNearestIndex` searches its
+#: bank in one part: a hand-over to another thread costs about 0.1 ms on a virtual machine
+#: whose idle core must be woken, as much as half the search of 2**17 pairs saves
+#: (``docs/methods/wei_levoy.md``, "Performance")
+PARALLEL_PAIRS = 1 << 18
 
 
 def _gamma(n: float, u: float) -> float:
@@ -1082,7 +1087,7 @@ class BoundedNearestIndex:
         counts = np.empty((n, bands.shape[1]), dtype=np.int64)
         gamma_x = 1.01 * _gamma(d + 3, _U64)
         gamma_e = 1.01 * _gamma(self.basis.shape[1] + 3, _U64)
-        n_parts = self._parts()
+        n_parts = self._parts(min(n, self.block))
         found = np.empty((n, n_parts * self.capacity), dtype=np.int64)
         for start in range(0, n, self.block):
             stop = min(n, start + self.block)
@@ -1094,8 +1099,11 @@ class BoundedNearestIndex:
             return index, distance, counts, found
         return index, distance, counts
 
-    def _parts(self) -> int:
-        """Parts of the bank searched in parallel: one per worker, of at least 1024 rows."""
+    def _parts(self, queries: int) -> int:
+        """Parts of the bank searched in parallel: one per worker, of at least 1024 rows, when a
+        block of ``queries`` makes at least :data:`PARALLEL_PAIRS` (query, row) pairs."""
+        if queries * len(self) < PARALLEL_PAIRS:
+            return 1
         return max(1, min(worker_count(), len(self) // 1024))
 
     def _search_block(
