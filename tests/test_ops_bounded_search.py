@@ -216,3 +216,30 @@ def test_gather_wrapped_equals_the_numpy_gather():
         [_gather(image, ys, xs, causal), _gather(parent, ys // 2, xs // 2, square)], axis=1
     )
     assert np.array_equal(q, expected)
+    tiny = rng.random((2, 3, 3))  # offsets reaching past the whole image
+    q = np.empty((4, len(causal) * 3))
+    gather_wrapped(tiny, np.array([0, 1, 1, 0]), np.array([0, 2, 1, 1]), causal, q)
+    assert np.array_equal(q, _gather(tiny, np.array([0, 1, 1, 0]), np.array([0, 2, 1, 1]), causal))
+
+
+def test_wavefront_queries_equal_the_gathers_and_the_seeds():
+    """Wei-Levoy's compiled wavefront pass against the NumPy gathers and seed formulas."""
+    from texsyn.methods.wei_levoy import _gather, _wavefront_queries, causal_offsets, square_offsets
+
+    rng = np.random.default_rng(6)
+    out, parent = rng.random((20, 17, 3)), rng.random((10, 9, 3))
+    src = rng.integers(0, 12 * 11, (20, 17))
+    ys = np.array([0, 1, 7, 19])
+    xs = np.array([16, 0, 3, 0])  # the wraps on every side
+    causal, square = causal_offsets(9), square_offsets(5)  # reaching across the parent's wrap
+    for par in (parent, np.empty((0, 0, 3))):
+        width = len(causal) * 3 + (len(square) * 3 if par.size else 0)
+        q, seeds = np.empty((4, width)), np.empty((4, 2), dtype=np.int64)
+        _wavefront_queries(out, par, ys, xs, causal, square, src, 11, 12, q, seeds)
+        parts = [_gather(out, ys, xs, causal)] + (
+            [_gather(par, ys // 2, xs // 2, square)] if par.size else []
+        )
+        assert np.array_equal(q, np.concatenate(parts, axis=1))
+        left, up = src[ys, xs - 1], src[ys - 1, xs]
+        assert np.array_equal(seeds[:, 0], left - left % 11 + (left + 1) % 11)
+        assert np.array_equal(seeds[:, 1], (up + 11) % (12 * 11))
