@@ -1252,9 +1252,11 @@ def nearest_rows_bounded(
         _isolated_seeds(queries, bank, np.ascontiguousarray(seeds), isolated, best)
     rest = np.flatnonzero(best < 0)
     if rest.size:
-        sub_seeds = None if seeds is None else seeds[rest]
+        every = rest.size == len(best)  # no copies when every query is searched
+        sub = queries if every else queries[rest]
+        sub_seeds = None if seeds is None else seeds if every else seeds[rest]
         found, _, counts, members = index.query(
-            queries[rest], nearest_rows_band(queries[rest], index.norm_max)[:, None], sub_seeds, members=True
+            sub, nearest_rows_band(sub, index.norm_max)[:, None], sub_seeds, members=True
         )
         best[rest] = found
         tied = np.flatnonzero(counts[:, 0] != 1)
