@@ -243,3 +243,16 @@ def test_wavefront_queries_equal_the_gathers_and_the_seeds():
         left, up = src[ys, xs - 1], src[ys - 1, xs]
         assert np.array_equal(seeds[:, 0], left - left % 11 + (left + 1) % 11)
         assert np.array_equal(seeds[:, 1], (up + 11) % (12 * 11))
+
+
+def test_searched_bands_are_the_band_of_the_queries_left():
+    from texsyn.ops.search import _BAND_FACTOR, _U64, _gamma, _searched_bands, nearest_rows_band
+
+    rng = np.random.default_rng(7)
+    queries = rng.random((30, 11))
+    best = np.where(rng.random(30) < 0.3, rng.integers(0, 9, 30), -1)
+    rest, bands = np.empty(30, dtype=np.int64), np.full((30, 1, 3), np.nan)
+    count = _searched_bands(queries, best, _BAND_FACTOR * _gamma(13, _U64), 2.5, rest, bands)
+    assert count == np.sum(best < 0) and np.array_equal(rest[:count], np.flatnonzero(best < 0))
+    np.testing.assert_allclose(bands[:count, 0, 2], nearest_rows_band(queries[best < 0], 2.5), rtol=1e-13)
+    assert np.all(bands[:count, 0, :2] == 0)
