@@ -164,7 +164,9 @@ def parallel_map(function: Callable, items) -> list:
     For work that releases the GIL (NumPy sorts, FFTs, BLAS): each item is computed the same
     way whichever thread runs it, so the results do not depend on the number of workers. The
     calling thread computes the first item itself while the pool takes the others (one
-    hand-over fewer per call: Wei and Levoy's search makes one call per wavefront). An error
+    hand-over fewer per call: Wei and Levoy's search makes one call per wavefront); a call of
+    at most one item per worker goes to helper threads instead of the pool (:class:`_Helper`,
+    a cheaper hand-over), unless another call is using them. An error
     is the first failing item's in item order, as in the loop; before it is raised, the
     items not started are cancelled and the running ones awaited (no work of the call goes
     on writing into the caller's arrays behind its exception).
