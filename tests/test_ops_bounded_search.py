@@ -101,6 +101,7 @@ def test_wei_levoy_proven_search_gives_the_plain_search_bytes(monkeypatch, worke
     fast = texsyn.make_method("wei_levoy", **params).fit(ex)
     assert fast.indexes_[0] is not None  # 64 x 64 = 4096 rows: the proven search is used
     monkeypatch.setattr(search, "worker_count", lambda: workers)  # parts of the bank per query
+    monkeypatch.setattr(search, "PARALLEL_PAIRS", 0)  # however few the queries of a wavefront
     got = fast.sample_with_map((72, 80), rng=3)
     monkeypatch.setattr(wl, "BOUNDED_SEARCH_ROWS", 10**9)
     plain = texsyn.make_method("wei_levoy", **params).fit(ex)
@@ -215,3 +216,43 @@ def test_gather_wrapped_equals_the_numpy_gather():
         [_gather(image, ys, xs, causal), _gather(parent, ys // 2, xs // 2, square)], axis=1
     )
     assert np.array_equal(q, expected)
+    tiny = rng.random((2, 3, 3))  # offsets reaching past the whole image
+    q = np.empty((4, len(causal) * 3))
+    gather_wrapped(tiny, np.array([0, 1, 1, 0]), np.array([0, 2, 1, 1]), causal, q)
+    assert np.array_equal(q, _gather(tiny, np.array([0, 1, 1, 0]), np.array([0, 2, 1, 1]), causal))
+
+
+def test_wavefront_queries_equal_the_gathers_and_the_seeds():
+    """Wei-Levoy's compiled wavefront pass against the NumPy gathers and seed formulas."""
+    from texsyn.methods.wei_levoy import _gather, _wavefront_queries, causal_offsets, square_offsets
+
+    rng = np.random.default_rng(6)
+    out, parent = rng.random((20, 17, 3)), rng.random((10, 9, 3))
+    src = rng.integers(0, 12 * 11, (20, 17))
+    ys = np.array([0, 1, 7, 19])
+    xs = np.array([16, 0, 3, 0])  # the wraps on every side
+    causal, square = causal_offsets(9), square_offsets(5)  # reaching across the parent's wrap
+    for par in (parent, np.empty((0, 0, 3))):
+        width = len(causal) * 3 + (len(square) * 3 if par.size else 0)
+        q, seeds = np.empty((4, width)), np.empty((4, 2), dtype=np.int64)
+        _wavefront_queries(out, par, ys, xs, causal, square, src, 11, 12, q, seeds)
+        parts = [_gather(out, ys, xs, causal)] + (
+            [_gather(par, ys // 2, xs // 2, square)] if par.size else []
+        )
+        assert np.array_equal(q, np.concatenate(parts, axis=1))
+        left, up = src[ys, xs - 1], src[ys - 1, xs]
+        assert np.array_equal(seeds[:, 0], left - left % 11 + (left + 1) % 11)
+        assert np.array_equal(seeds[:, 1], (up + 11) % (12 * 11))
+
+
+def test_searched_bands_are_the_band_of_the_queries_left():
+    from texsyn.ops.search import _BAND_FACTOR, _U64, _gamma, _searched_bands, nearest_rows_band
+
+    rng = np.random.default_rng(7)
+    queries = rng.random((30, 11))
+    best = np.where(rng.random(30) < 0.3, rng.integers(0, 9, 30), -1)
+    rest, bands = np.empty(30, dtype=np.int64), np.full((30, 1, 3), np.nan)
+    count = _searched_bands(queries, best, _BAND_FACTOR * _gamma(13, _U64), 2.5, rest, bands)
+    assert count == np.sum(best < 0) and np.array_equal(rest[:count], np.flatnonzero(best < 0))
+    np.testing.assert_allclose(bands[:count, 0, 2], nearest_rows_band(queries[best < 0], 2.5), rtol=1e-13)
+    assert np.all(bands[:count, 0, :2] == 0)

@@ -73,3 +73,29 @@ def test_a_map_inside_a_map_runs_in_the_pools_thread_without_deadlock(monkeypatc
     assert [inner for inner, _ in results] == [[10 * i + j for j in range(4)] for i in range(6)]
     reference = linalg.matmul(a, b)
     assert all(np.array_equal(product, reference) for _, product in results)
+
+
+def test_one_item_per_worker_runs_on_the_helpers_and_awaits_every_item(monkeypatch):
+    monkeypatch.setattr(linalg, "worker_count", lambda: 3)
+    threads = linalg.parallel_map(lambda i: threading.get_ident(), range(3))
+    assert threads[0] == threading.get_ident() and len(set(threads)) == 3
+    finished = []
+
+    def item(i: int) -> int:
+        if i == 0:
+            raise ValueError("item 0")
+        time.sleep(0.05)
+        finished.append(i)
+        if i == 2:
+            raise KeyError(i)
+        return i
+
+    with pytest.raises(ValueError, match="item 0"):
+        linalg.parallel_map(item, range(3))
+    assert sorted(finished) == [1, 2]  # both helpers' items awaited, the first item's error raised
+    with pytest.raises(KeyError):
+        linalg.parallel_map(item, [1, 2])
+    # a call made from inside a call: the caller's thread finds the helpers busy and takes the
+    # pool, a helper runs it itself: no deadlock
+    nested = linalg.parallel_map(lambda i: linalg.parallel_map(lambda j: 10 * i + j, range(2)), range(2))
+    assert nested == [[0, 1], [10, 11]]

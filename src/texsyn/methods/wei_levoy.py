@@ -50,6 +50,7 @@ import numpy as np
 from .._validation import OneOf, Range
 from ..drivers.coarse_to_fine import coarse_to_fine
 from ..errors import InputError
+from ..ops.jit import jit
 from ..ops.linalg import BLOCK_COLUMNS
 from ..ops.patches import as_channels, gather_wrapped
 from ..ops.progress import Reporter
@@ -96,6 +97,49 @@ def _gather(image: np.ndarray, rows: np.ndarray, cols: np.ndarray, offsets: np.n
     cc = (cols[:, None] + offsets[None, :, 1]) % w
     flat = image.reshape(h * w, -1)
     return np.take(flat, rr * w + cc, axis=0).reshape(len(rows), -1)
+
+
+@jit()
+def _wavefront_queries(out, parent, ys, xs, causal, parent_offsets, src, ew, eh, queries, seeds):
+    """One wavefront's queries and seeds in one compiled pass (:meth:`WeiLevoy._synthesise_level`).
+
+    ``queries[i]``: the causal neighbourhood of pixel ``(ys[i], xs[i])`` in ``out``, then the
+    parent square around ``(ys[i] // 2, xs[i] // 2)`` in ``parent`` (none when ``parent`` has
+    no pixel), both wrapped (:func:`texsyn.ops.patches.gather_wrapped`'s values);
+    ``seeds[i]``: the continuations of the left and upper pixels' sources ``src`` in the
+    ``eh x ew`` exemplar (the next pixel of the left source's row, the pixel under the upper
+    source, both wrapped).
+    """
+    h, w, channels = out.shape
+    ph, pw = parent.shape[0], parent.shape[1]
+    for i in range(ys.shape[0]):
+        y, x = ys[i], xs[i]
+        k = 0
+        for o in range(causal.shape[0]):
+            r = y + causal[o, 0]
+            c = x + causal[o, 1]
+            if r < 0 or r >= h:  # a division only across the wrap
+                r %= h
+            if c < 0 or c >= w:
+                c %= w
+            for ch in range(channels):
+                queries[i, k] = out[r, c, ch]
+                k += 1
+        if ph > 0:
+            for o in range(parent_offsets.shape[0]):
+                r = y // 2 + parent_offsets[o, 0]
+                c = x // 2 + parent_offsets[o, 1]
+                if r < 0 or r >= ph:
+                    r %= ph
+                if c < 0 or c >= pw:
+                    c %= pw
+                for ch in range(channels):
+                    queries[i, k] = parent[r, c, ch]
+                    k += 1
+        left = src[y, (x - 1) % w]
+        up = src[(y - 1) % h, x]
+        seeds[i, 0] = left - left % ew + (left + 1) % ew
+        seeds[i, 1] = (up + ew) % (eh * ew)
 
 
 def _squared_norms(bank: np.ndarray, rows: int = 1024) -> np.ndarray:
@@ -371,26 +415,29 @@ class WeiLevoy(TextureSynthesizer):
         index, isolated = self.indexes_[level], self.isolated_[level]
         slope = self.window // 2 + 1
         ys_all = np.arange(h)
+        # the index's wavefronts gather their queries and seeds in one compiled pass
+        no_parent = np.empty((0, 0, ex.shape[2]))
         for t in range(w + slope * (h - 1)):
-            xs = t - slope * ys_all
-            ok = (xs >= 0) & (xs < w)
-            ys, xs = ys_all[ok], xs[ok]
-            if ys.size == 0:
+            first, last = max(0, -(-(t - w + 1) // slope)), min(h - 1, t // slope)
+            if first > last:
                 continue
+            ys = ys_all[first : last + 1]
+            xs = t - slope * ys
             q = np.empty((ys.size, bank.shape[1]))  # the causal part, then the parent square
-            gather_wrapped(out, ys, xs, self.causal_, q)
-            if parent is not None:
-                gather_wrapped(parent, ys // 2, xs // 2, self.parent_, q, len(self.causal_) * out.shape[2])
-            if tree is not None:
-                best = tree.nearest(q)
-            elif index is not None:  # seeds: the continuations of the left and upper sources
-                left, up = src[ys, xs - 1], src[ys - 1, xs]
+            if index is not None:
                 seeds = np.empty((ys.size, 2), dtype=np.int64)
-                seeds[:, 0] = left - left % ew + (left + 1) % ew
-                seeds[:, 1] = (up + ew) % (eh * ew)
+                _wavefront_queries(
+                    out, no_parent if parent is None else parent, ys, xs, self.causal_, self.parent_,
+                    src, ew, eh, q, seeds,
+                )  # fmt: skip
                 best = nearest_rows_bounded(q, bank, norms, index, seeds, isolated)
             else:
-                best = nearest_rows(q, bank, norms)
+                gather_wrapped(out, ys, xs, self.causal_, q)
+                if parent is not None:
+                    gather_wrapped(
+                        parent, ys // 2, xs // 2, self.parent_, q, len(self.causal_) * out.shape[2]
+                    )
+                best = tree.nearest(q) if tree is not None else nearest_rows(q, bank, norms)
             out[ys, xs] = flat_ex[best]
             src[ys, xs] = best
             done += len(ys)

@@ -29,8 +29,12 @@ def _gather_wrapped(image, rows, cols, offsets, out, start):
     for i in range(rows.shape[0]):
         k = start
         for o in range(offsets.shape[0]):
-            r = (rows[i] + offsets[o, 0]) % h
-            c = (cols[i] + offsets[o, 1]) % w
+            r = rows[i] + offsets[o, 0]
+            c = cols[i] + offsets[o, 1]
+            if r < 0 or r >= h:  # a division only across the wrap
+                r %= h
+            if c < 0 or c >= w:
+                c %= w
             for ch in range(channels):
                 out[i, k] = image[r, c, ch]
                 k += 1

@@ -538,6 +538,13 @@ class NearestPatchIndex:
 #: unit roundoff of float64 and float32
 _U64 = 2.0**-53
 _U32 = 2.0**-24
+#: :func:`nearest_rows_band`'s ``2 E = 2 x 2.2 gamma_{D+2} (max ||b|| + ||q||)^2`` less its gamma
+_BAND_FACTOR = 2.0 * 2.2
+#: (query, bank row) pairs of a block below which :class:`BoundedNearestIndex` searches its
+#: bank in one part: a hand-over to another thread costs about 0.1 ms on a virtual machine
+#: whose idle core must be woken, as much as half the search of 2**17 pairs saves
+#: (``docs/methods/wei_levoy.md``, "Performance")
+PARALLEL_PAIRS = 1 << 18
 
 
 def _gamma(n: float, u: float) -> float:
@@ -1082,7 +1089,7 @@ class BoundedNearestIndex:
         counts = np.empty((n, bands.shape[1]), dtype=np.int64)
         gamma_x = 1.01 * _gamma(d + 3, _U64)
         gamma_e = 1.01 * _gamma(self.basis.shape[1] + 3, _U64)
-        n_parts = self._parts()
+        n_parts = self._parts(min(n, self.block))
         found = np.empty((n, n_parts * self.capacity), dtype=np.int64)
         for start in range(0, n, self.block):
             stop = min(n, start + self.block)
@@ -1094,8 +1101,11 @@ class BoundedNearestIndex:
             return index, distance, counts, found
         return index, distance, counts
 
-    def _parts(self) -> int:
-        """Parts of the bank searched in parallel: one per worker, of at least 1024 rows."""
+    def _parts(self, queries: int) -> int:
+        """Parts of the bank searched in parallel: one per worker, of at least 1024 rows, when a
+        block of ``queries`` makes at least :data:`PARALLEL_PAIRS` (query, row) pairs."""
+        if queries * len(self) < PARALLEL_PAIRS:
+            return 1
         return max(1, min(worker_count(), len(self) // 1024))
 
     def _search_block(
@@ -1173,6 +1183,26 @@ def bounded_index_bytes(rows: float, dim: int, *, dims: int = 32, extra: int = 3
     return kept, building
 
 
+@jit()
+def _searched_bands(queries, best, factor, bank_norm_max, rest, bands):
+    """The queries still to search (``best[i] < 0``) into ``rest``, and their
+    :func:`nearest_rows_band` as constant bands ``(0, 0, E)`` into ``bands``; returns their number."""
+    n = 0
+    for i in range(queries.shape[0]):
+        if best[i] >= 0:
+            continue
+        size = 0.0
+        for t in range(queries.shape[1]):
+            size += queries[i, t] * queries[i, t]
+        reach = bank_norm_max + np.sqrt(size)
+        rest[n] = i
+        bands[n, 0, 0] = 0.0
+        bands[n, 0, 1] = 0.0
+        bands[n, 0, 2] = factor * (reach * reach)
+        n += 1
+    return n
+
+
 def nearest_rows_band(queries: np.ndarray, bank_norm_max: float) -> np.ndarray:
     """How far from the smallest distance the row :func:`nearest_rows` picks can be (squared).
 
@@ -1183,7 +1213,7 @@ def nearest_rows_band(queries: np.ndarray, bank_norm_max: float) -> np.ndarray:
     """
     queries = np.asarray(queries, dtype=np.float64)
     q_norm = np.sqrt(np.einsum("kd,kd->k", queries, queries))
-    return 2.0 * 2.2 * _gamma(queries.shape[1] + 2, _U64) * (bank_norm_max + q_norm) ** 2
+    return _BAND_FACTOR * _gamma(queries.shape[1] + 2, _U64) * (bank_norm_max + q_norm) ** 2
 
 
 @jit()
@@ -1238,16 +1268,21 @@ def nearest_rows_bounded(
             The bank rows with no other row within their band.
     """
     queries = np.ascontiguousarray(queries, dtype=np.float64)
-    best = np.full(queries.shape[0], -1, dtype=np.int64)
+    n = queries.shape[0]
+    best = np.full(n, -1, dtype=np.int64)
     if seeds is not None and isolated is not None:
-        seeds = np.asarray(seeds, dtype=np.int64).reshape(queries.shape[0], -1)
+        seeds = np.asarray(seeds, dtype=np.int64).reshape(n, -1)
         _isolated_seeds(queries, bank, np.ascontiguousarray(seeds), isolated, best)
-    rest = np.flatnonzero(best < 0)
-    if rest.size:
-        sub_seeds = None if seeds is None else seeds[rest]
-        found, _, counts, members = index.query(
-            queries[rest], nearest_rows_band(queries[rest], index.norm_max)[:, None], sub_seeds, members=True
-        )
+    rest, bands = np.empty(n, dtype=np.int64), np.empty((n, 1, 3))
+    count = _searched_bands(
+        queries, best, _BAND_FACTOR * _gamma(queries.shape[1] + 2, _U64), index.norm_max, rest, bands
+    )
+    if count:
+        every = count == n  # no copies when every query is searched
+        rest = rest[:count]
+        sub = queries if every else queries[rest]
+        sub_seeds = None if seeds is None else seeds if every else seeds[rest]
+        found, _, counts, members = index.query(sub, bands[:count], sub_seeds, members=True)
         best[rest] = found
         tied = np.flatnonzero(counts[:, 0] != 1)
         if tied.size:
