@@ -334,23 +334,29 @@ class PortillaSimoncelli(TextureSynthesizer):
 
         An empirical model of the analysis and of one iteration of the projections, fitted
         to the measured peaks (resident growth and ``tracemalloc``, 128x128 exemplars, grey
-        and colour, 256x256 and 512x512 outputs; ``benchmarks/memory.md``): about
-        ``600 + 400 C`` bytes per exemplar pixel for the fit, and for sampling ``150`` per
-        exemplar pixel (the statistics' targets) and ``220 + 300 C`` per output pixel with
-        the default four orientations (``C`` the channels synthesised together;
-        ``docs/memory.md``, "Every method at its defaults").
+        and colour, 256x256 and 512x512 outputs, 2 to 8 orientations; ``docs/memory.md``,
+        "Every method at its defaults"): ``150 + 100 n + C (40 + 95 n)`` bytes per exemplar
+        pixel for the fit, and for sampling ``150`` per exemplar pixel (the statistics'
+        targets) and ``90 + 45 n + C (20 + 70 n)`` per canvas pixel (``n`` the
+        orientations, ``C`` the channels synthesised together): every subband of the
+        pyramids is one more per orientation, grey ones included (fitted on four
+        orientations only, the terms fell 15 % below the resident peaks with eight).
         """
         h, w, c = shape_dims(exemplar_shape)
         k = float(h * w)
         channels = 3 if c == 3 and self.colour != "grey" else 1
         terms = {"exemplar": 16.0 * k * c}
         if output_shape is None:
-            terms["analysis of the exemplar"] = k * (600.0 + channels * (80.0 + 80.0 * self.n_orientations))
+            terms["analysis of the exemplar"] = k * (
+                150.0 + 100.0 * self.n_orientations + channels * (40.0 + 95.0 * self.n_orientations)
+            )
             return terms
         ch, cw = self._canvas(output_shape)
         canvas = float(ch) * float(cw)
         terms["statistics' targets"] = 150.0 * k
-        terms["pyramids of one iteration"] = canvas * (220.0 + channels * (60.0 + 60.0 * self.n_orientations))
+        terms["pyramids of one iteration"] = canvas * (
+            90.0 + 45.0 * self.n_orientations + channels * (20.0 + 70.0 * self.n_orientations)
+        )
         terms["output image"] = output_bytes(c, output_shape)
         return terms
 

@@ -58,90 +58,91 @@ _PARALLEL_MIN_WORK = 1 << 22
 
 _lock = threading.Lock()
 _depth = 0
-_saved: list = []
-#: the BLAS libraries' per-thread count setters, found by the first entrant (:func:`_enter`)
-_local_setters: tuple[Callable[[int], int], ...] = ()
-#: per thread: the counts its entries replaced (:func:`_enter`)
-_thread_state = threading.local()
+#: (setter, thread count) of every BLAS library set by the first entrant (:func:`_enter`)
+_saved: list[tuple[Callable[[int], object], int]] = []
 _pool: ThreadPoolExecutor | None = None
 _pool_lock = threading.Lock()
 #: :func:`parallel_map`'s helper threads (one call at a time uses them: ``_helpers_lock``)
 _helpers: list = []
 _helpers_lock = threading.Lock()
+#: marks texsyn's own worker threads (:func:`_mark_worker_thread`)
+_worker_thread = threading.local()
 
 F = TypeVar("F", bound=Callable)
 
 
 def _enter() -> None:
-    """Set every loaded BLAS library (NumPy's, SciPy's...) to one thread: the first entrant
-    for the process, and every entrant for its own thread.
+    """First entrant, from whichever thread: set every loaded BLAS library (NumPy's,
+    SciPy's...) to one thread.
 
-    OpenBLAS keeps a thread's count apart from the process's once the process has set it
-    (0.3.31: a thread other than the one that set it first keeps computing with the default
-    count, whatever its own call to the process-wide setter asks), so each thread that
-    enters also sets its own count (``openblas_set_num_threads_local``), given back when it
-    leaves: a method run by a web server's or a batch worker's thread gives the bytes of the
-    command line (``tests/test_ops_linalg_threads.py``).
+    The count of an OpenBLAS built on its own threads (``pthreads``, the wheels' build) is
+    one value for the whole process, whichever thread sets it, and its thread pool serves
+    every thread; :func:`_process_wide_setter` sets it directly. threadpoolctl would
+    ignore the call from any thread but the first one that set the count while that thread
+    lives (its "controlling thread"): a web server's or a batch worker's thread entering
+    after the main thread had run anything kept two threads and gave other bytes than the
+    command line (``tests/test_ops_linalg_threads.py``). The count stays at one until the
+    last caller, from any thread, leaves, so the pool's workers and every thread inside
+    compute with it; a count set per thread would not do: the last setter's value holds
+    for all of them.
     """
-    global _depth, _local_setters
+    global _depth
     with _lock:
         if _depth == 0:
             from threadpoolctl import ThreadpoolController
 
             # made anew each time: libraries loaded since the last call are included
-            found = []
             for lib in ThreadpoolController().lib_controllers:
                 if lib.user_api == "blas":
-                    _saved.append((lib, lib.num_threads))
-                    lib.set_num_threads(1)
-                    if lib.internal_api == "openblas":
-                        found.append(_thread_count_setter(lib.filepath))
-            _local_setters = tuple(setter for setter in found if setter is not None)
+                    setter = _process_wide_setter(lib)
+                    _saved.append((setter, lib.num_threads))
+                    setter(1)
         _depth += 1
-        setters = _local_setters
-    if _on_worker_thread():  # texsyn's own workers compute BLAS on one thread for good
-        if getattr(_thread_state, "pinned", None) is not setters:
-            for setter in setters:
-                setter(1)
-            _thread_state.pinned = setters
-        counts = []
-    else:
-        counts = [(setter, setter(1)) for setter in setters]
-    _thread_state.__dict__.setdefault("entries", []).append(counts)
 
 
 def _exit() -> None:
-    """Give the thread its own counts back; the last leaver gives every BLAS library back
-    the thread count it had."""
+    """Last leaver, from whichever thread: give every BLAS library back the thread count it
+    had."""
     global _depth
-    for setter, count in reversed(_thread_state.entries.pop()):
-        setter(count)
     with _lock:
         _depth -= 1
         if _depth == 0:
             while _saved:
-                lib, threads = _saved.pop()
-                lib.set_num_threads(threads)
+                setter, threads = _saved.pop()
+                setter(threads)
 
 
-def _inside_fixed_order() -> bool:
-    """Whether the calling thread is inside :func:`fixed_order`."""
-    return bool(getattr(_thread_state, "entries", None))
+def _process_wide_setter(lib) -> Callable[[int], object]:
+    """The setter of ``lib``'s thread count (a threadpoolctl controller): OpenBLAS's own
+    ``openblas_set_num_threads`` where its threads are its own (``pthreads``), found under
+    the wheels' symbol names; threadpoolctl's otherwise (an OpenMP build's count is the
+    calling thread's, which threadpoolctl sets from any thread)."""
+    if lib.internal_api == "openblas" and getattr(lib, "threading_layer", "") == "pthreads":
+        setter = _openblas_setter(lib.filepath)
+        if setter is not None:
+            return setter
+    return lib.set_num_threads
 
 
 @functools.cache
-def _thread_count_setter(path: str) -> Callable[[int], int] | None:
-    """OpenBLAS's ``openblas_set_num_threads_local`` in the library at ``path`` (it returns
-    the count it replaces), or None where the library has none (before 0.3.27)."""
+def _openblas_setter(path: str) -> Callable[[int], object] | None:
+    """``openblas_set_num_threads`` of the library at ``path`` (C interface), under the names
+    the builds give it (the ``scipy_`` prefix and ``64_`` suffix of NumPy's and SciPy's
+    wheels), or None."""
     import ctypes
 
     try:
-        setter = ctypes.CDLL(path).openblas_set_num_threads_local
-    except (OSError, AttributeError):
+        library = ctypes.CDLL(path)
+    except OSError:
         return None
-    setter.argtypes = [ctypes.c_int]
-    setter.restype = ctypes.c_int
-    return setter
+    for prefix in ("", "scipy_"):
+        for suffix in ("", "64_"):
+            setter = getattr(library, f"{prefix}openblas_set_num_threads{suffix}", None)
+            if setter is not None:
+                setter.argtypes = [ctypes.c_int]
+                setter.restype = None
+                return setter
+    return None
 
 
 @contextmanager
@@ -229,14 +230,13 @@ def parallel_map(function: Callable, items) -> list:
     workers = worker_count()
     if len(items) <= 1 or workers == 1 or _on_worker_thread():
         return [function(item) for item in items]
-    task = _in_fixed_order(function) if _inside_fixed_order() else function
     if len(items) <= workers and _helpers_lock.acquire(blocking=False):
         try:  # one item per thread: the helpers' hand-over, cheaper than the pool's futures
-            return _on_helpers(function, task, items)
+            return _on_helpers(function, items)
         finally:
             _helpers_lock.release()
     pool = _thread_pool()
-    rest = [pool.submit(task, item) for item in items[1:]]
+    rest = [pool.submit(function, item) for item in items[1:]]
     try:
         first = function(items[0])
         return [first, *(future.result() for future in rest)]
@@ -245,17 +245,6 @@ def parallel_map(function: Callable, items) -> list:
             future.cancel()
         wait(rest)
         raise
-
-
-def _in_fixed_order(function: Callable) -> Callable:
-    """``function`` run inside :func:`fixed_order` by the pool's thread that takes it (each
-    thread sets its own BLAS thread count, :func:`_enter`)."""
-
-    def task(*args):
-        with _fixed_order_context():
-            return function(*args)
-
-    return task
 
 
 class _Helper:
@@ -294,14 +283,13 @@ class _Helper:
         return result
 
 
-def _on_helpers(function: Callable, task: Callable, items: list) -> list:
-    """:func:`parallel_map` of at most one item per worker: the caller computes the first item
-    (``function``), a helper thread each other one (``task``: ``function``, inside
-    :func:`fixed_order` when the caller is); every item is awaited before an error is raised."""
+def _on_helpers(function: Callable, items: list) -> list:
+    """:func:`parallel_map` of at most one item per worker: the caller computes the first item,
+    a helper thread each other one; every item is awaited before an error is raised."""
     while len(_helpers) < len(items) - 1:
         _helpers.append(_Helper())
     for helper, item in zip(_helpers, items[1:]):
-        helper.start(task, item)
+        helper.start(function, item)
     try:
         first: tuple[bool, object] = (True, function(items[0]))
     except BaseException as error:
@@ -327,13 +315,13 @@ def _thread_pool() -> ThreadPoolExecutor:
 
 def _mark_worker_thread() -> None:
     """Mark the calling thread as one of texsyn's own workers (the pool's, the helpers')."""
-    _thread_state.worker = True
+    _worker_thread.inside = True
 
 
 def _on_worker_thread() -> bool:
     """Whether the calling thread is one of texsyn's own workers: a map from it runs in it (no
-    nesting), and its BLAS computes on one thread for good (:func:`_enter`)."""
-    return getattr(_thread_state, "worker", False)
+    nesting: waiting on the workers from inside one could leave them all waiting)."""
+    return getattr(_worker_thread, "inside", False)
 
 
 def matmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -380,7 +368,7 @@ def matmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         if workers == 1 or _on_worker_thread():  # (inside the pool: no nested map, parallel_map)
             run(tiles)
         else:
-            list(_thread_pool().map(_in_fixed_order(run), [tiles[i::workers] for i in range(workers)]))
+            list(_thread_pool().map(run, [tiles[i::workers] for i in range(workers)]))
         return out
 
 
