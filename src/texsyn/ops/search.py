@@ -40,6 +40,7 @@ __all__ = [
     "knn_patches",
     "nearest_both_ways",
     "bounded_index_bytes",
+    "bounded_query_bytes",
     "nearest_rows",
     "nearest_rows_band",
     "nearest_rows_bounded",
@@ -1089,7 +1090,7 @@ class BoundedNearestIndex:
         counts = np.empty((n, bands.shape[1]), dtype=np.int64)
         gamma_x = 1.01 * _gamma(d + 3, _U64)
         gamma_e = 1.01 * _gamma(self.basis.shape[1] + 3, _U64)
-        n_parts = self._parts(min(n, self.block))
+        n_parts = self._parts(min(n, self.block))  # (bounded_query_bytes counts this buffer)
         found = np.empty((n, n_parts * self.capacity), dtype=np.int64)
         for start in range(0, n, self.block):
             stop = min(n, start + self.block)
@@ -1104,9 +1105,7 @@ class BoundedNearestIndex:
     def _parts(self, queries: int) -> int:
         """Parts of the bank searched in parallel: one per worker, of at least 1024 rows, when a
         block of ``queries`` makes at least :data:`PARALLEL_PAIRS` (query, row) pairs."""
-        if queries * len(self) < PARALLEL_PAIRS:
-            return 1
-        return max(1, min(worker_count(), len(self) // 1024))
+        return _bank_parts(queries, len(self))
 
     def _search_block(
         self,
@@ -1165,6 +1164,25 @@ class BoundedNearestIndex:
         _bounded_merge(
             best_j, best_x, keep_j, keep_x, kept, overflow, gamma_x, bands, index, distance, counts, members
         )  # fmt: skip
+
+
+def _bank_parts(queries: float, rows: float) -> int:
+    """:meth:`BoundedNearestIndex._parts`: one part per worker, of at least 1024 rows, when a
+    block of ``queries`` makes at least :data:`PARALLEL_PAIRS` (query, row) pairs."""
+    if queries * rows < PARALLEL_PAIRS:
+        return 1
+    return max(1, min(worker_count(), int(rows) // 1024))
+
+
+def bounded_query_bytes(queries: float, rows: float, *, block: int = 256, capacity: int = 64) -> float:
+    """Bytes of the candidates a :class:`BoundedNearestIndex` of ``rows`` rows holds while it
+    answers ``queries`` queries at once: ``capacity`` int64 rows per query and bank part
+    (``found``), and each part's kept rows and distances for one block (``docs/memory.md``).
+
+    The parts are one per worker for large blocks, so the bytes grow with the workers.
+    """
+    parts = _bank_parts(min(queries, block), rows)
+    return 8.0 * capacity * parts * queries + 16.0 * capacity * parts * min(queries, block)
 
 
 def bounded_index_bytes(rows: float, dim: int, *, dims: int = 32, extra: int = 32) -> tuple[float, float]:
