@@ -52,7 +52,7 @@ from ..drivers.coarse_to_fine import coarse_to_fine
 from ..errors import InputError
 from ..ops.jit import jit
 from ..ops.linalg import BLOCK_COLUMNS
-from ..ops.patches import as_channels, gather_wrapped
+from ..ops.patches import as_channels, gather_wrapped, gather_wrapped_kernel
 from ..ops.progress import Reporter
 from ..ops.search import (
     BoundedNearestIndex,
@@ -101,41 +101,21 @@ def _gather(image: np.ndarray, rows: np.ndarray, cols: np.ndarray, offsets: np.n
 
 @jit()
 def _wavefront_queries(out, parent, ys, xs, causal, parent_offsets, src, ew, eh, queries, seeds):
-    """One wavefront's queries and seeds in one compiled pass (:meth:`WeiLevoy._synthesise_level`).
+    """One wavefront's queries and seeds in one compiled call (:meth:`WeiLevoy._synthesise_level`).
 
     ``queries[i]``: the causal neighbourhood of pixel ``(ys[i], xs[i])`` in ``out``, then the
     parent square around ``(ys[i] // 2, xs[i] // 2)`` in ``parent`` (none when ``parent`` has
-    no pixel), both wrapped (:func:`texsyn.ops.patches.gather_wrapped`'s values);
+    no pixel), both wrapped (:func:`texsyn.ops.patches.gather_wrapped_kernel`);
     ``seeds[i]``: the continuations of the left and upper pixels' sources ``src`` in the
     ``eh x ew`` exemplar (the next pixel of the left source's row, the pixel under the upper
     source, both wrapped).
     """
     h, w, channels = out.shape
-    ph, pw = parent.shape[0], parent.shape[1]
+    gather_wrapped_kernel(out, ys, xs, causal, queries, 0)
+    if parent.shape[0] > 0:
+        gather_wrapped_kernel(parent, ys // 2, xs // 2, parent_offsets, queries, causal.shape[0] * channels)
     for i in range(ys.shape[0]):
         y, x = ys[i], xs[i]
-        k = 0
-        for o in range(causal.shape[0]):
-            r = y + causal[o, 0]
-            c = x + causal[o, 1]
-            if r < 0 or r >= h:  # a division only across the wrap
-                r %= h
-            if c < 0 or c >= w:
-                c %= w
-            for ch in range(channels):
-                queries[i, k] = out[r, c, ch]
-                k += 1
-        if ph > 0:
-            for o in range(parent_offsets.shape[0]):
-                r = y // 2 + parent_offsets[o, 0]
-                c = x // 2 + parent_offsets[o, 1]
-                if r < 0 or r >= ph:
-                    r %= ph
-                if c < 0 or c >= pw:
-                    c %= pw
-                for ch in range(channels):
-                    queries[i, k] = parent[r, c, ch]
-                    k += 1
         left = src[y, (x - 1) % w]
         up = src[(y - 1) % h, x]
         seeds[i, 0] = left - left % ew + (left + 1) % ew

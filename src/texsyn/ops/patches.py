@@ -13,6 +13,7 @@ __all__ = [
     "extend_index",
     "extract_patches",
     "gather_wrapped",
+    "gather_wrapped_kernel",
     "overlap_add",
     "wrap_seam_ratio",
 ]
@@ -24,7 +25,9 @@ def as_channels(image: np.ndarray) -> np.ndarray:
 
 
 @jit()
-def _gather_wrapped(image, rows, cols, offsets, out, start):
+def gather_wrapped_kernel(image, rows, cols, offsets, out, start):
+    """:func:`gather_wrapped` as a compiled kernel, for other kernels to call (every argument
+    given, ``start`` included)."""
     h, w, channels = image.shape
     for i in range(rows.shape[0]):
         k = start
@@ -63,7 +66,7 @@ def gather_wrapped(
     start : int
         First column written.
     """
-    _gather_wrapped(image, rows, cols, offsets, out, start)
+    gather_wrapped_kernel(image, rows, cols, offsets, out, start)
 
 
 def extend_index(index: np.ndarray, size: int, mode: str = "symmetric") -> np.ndarray:
