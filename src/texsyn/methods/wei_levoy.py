@@ -43,6 +43,7 @@ SIGGRAPH 2000, sections 2-3.
 
 from __future__ import annotations
 
+from contextlib import nullcontext
 from typing import Annotated
 
 import numpy as np
@@ -395,34 +396,37 @@ class WeiLevoy(TextureSynthesizer):
         index, isolated = self.indexes_[level], self.isolated_[level]
         slope = self.window // 2 + 1
         ys_all = np.arange(h)
-        # the index's wavefronts gather their queries and seeds in one compiled pass
+        # the index's wavefronts gather their queries and seeds in one compiled pass, and its
+        # part workers stay ready between wavefronts
         no_parent = np.empty((0, 0, ex.shape[2]))
-        for t in range(w + slope * (h - 1)):
-            first, last = max(0, -(-(t - w + 1) // slope)), min(h - 1, t // slope)
-            if first > last:
-                continue
-            ys = ys_all[first : last + 1]
-            xs = t - slope * ys
-            q = np.empty((ys.size, bank.shape[1]))  # the causal part, then the parent square
-            if index is not None:
-                seeds = np.empty((ys.size, 2), dtype=np.int64)
-                _wavefront_queries(
-                    out, no_parent if parent is None else parent, ys, xs, self.causal_, self.parent_,
-                    src, ew, eh, q, seeds,
-                )  # fmt: skip
-                best = nearest_rows_bounded(q, bank, norms, index, seeds, isolated)
-            else:
-                gather_wrapped(out, ys, xs, self.causal_, q)
-                if parent is not None:
-                    gather_wrapped(
-                        parent, ys // 2, xs // 2, self.parent_, q, len(self.causal_) * out.shape[2]
-                    )
-                best = tree.nearest(q) if tree is not None else nearest_rows(q, bank, norms)
-            out[ys, xs] = flat_ex[best]
-            src[ys, xs] = best
-            done += len(ys)
-            if t % 64 == 0:
-                reporter(done)
+        workers = None if index is None else index.parallel_search(min(h, -(-w // slope)), 2)
+        with workers or nullcontext():
+            for t in range(w + slope * (h - 1)):
+                first, last = max(0, -(-(t - w + 1) // slope)), min(h - 1, t // slope)
+                if first > last:
+                    continue
+                ys = ys_all[first : last + 1]
+                xs = t - slope * ys
+                q = np.empty((ys.size, bank.shape[1]))  # the causal part, then the parent square
+                if index is not None:
+                    seeds = np.empty((ys.size, 2), dtype=np.int64)
+                    _wavefront_queries(
+                        out, no_parent if parent is None else parent, ys, xs, self.causal_, self.parent_,
+                        src, ew, eh, q, seeds,
+                    )  # fmt: skip
+                    best = nearest_rows_bounded(q, bank, norms, index, seeds, isolated, workers)
+                else:
+                    gather_wrapped(out, ys, xs, self.causal_, q)
+                    if parent is not None:
+                        gather_wrapped(
+                            parent, ys // 2, xs // 2, self.parent_, q, len(self.causal_) * out.shape[2]
+                        )
+                    best = tree.nearest(q) if tree is not None else nearest_rows(q, bank, norms)
+                out[ys, xs] = flat_ex[best]
+                src[ys, xs] = best
+                done += len(ys)
+                if t % 64 == 0:
+                    reporter(done)
         return out, src
 
     def _full_bank(self, level: int) -> tuple[np.ndarray, np.ndarray]:

@@ -6,10 +6,12 @@ command that never calls a kernel (``texsyn synth -m random_phase``) should pay 
 :func:`jit`; the decorator returns a :class:`LazyKernel` that imports numba and compiles the
 function with ``numba.njit(cache=True)`` when it is first called.
 
-A kernel may call another kernel of its module, and a parallel kernel loops over
-:data:`prange` (``range`` until compiled, numba's ``prange`` in the compiled code): at
-compile time the function is rebuilt over a copy of its module's namespace in which both
-are replaced by what numba compiles (numba reads global values as compile-time constants
+A kernel may call another kernel of its module, a parallel kernel loops over
+:data:`prange` (``range`` until compiled, numba's ``prange`` in the compiled code), and a
+kernel that threads share reads and writes their flags with :data:`atomic_load` and
+:data:`atomic_store` (:class:`KernelIntrinsic`: plain indexing until compiled): at compile
+time the function is rebuilt over a copy of its module's namespace in which these are
+replaced by what numba compiles (numba reads global values as compile-time constants
 anyway).
 """
 
@@ -22,10 +24,104 @@ import types
 from collections.abc import Callable
 from typing import Any
 
-__all__ = ["LazyKernel", "jit", "prange"]
+__all__ = ["LazyKernel", "atomic_load", "atomic_store", "jit", "prange"]
 
 #: the parallel loop of a kernel: ``range`` in Python, numba's ``prange`` once compiled
 prange = range
+
+
+class KernelIntrinsic:
+    """An operation kernels call: a plain Python function, replaced in the compiled kernel by a
+    numba intrinsic built (numba imported) when the first kernel that calls it is compiled.
+
+    Parameters
+    ----------
+    python : callable
+        What the operation does when the kernel runs as plain Python.
+    build : callable
+        Returns the numba intrinsic (called once, with numba importable).
+    """
+
+    def __init__(self, python: Callable[..., Any], build: Callable[[], Any]) -> None:
+        self.python = python
+        self._build = build
+        self._intrinsic: Any = None
+        functools.update_wrapper(self, python)
+
+    def __call__(self, *args: Any) -> Any:
+        return self.python(*args)
+
+    def intrinsic(self) -> Any:
+        """The numba intrinsic (built on the first call)."""
+        if self._intrinsic is None:
+            self._intrinsic = self._build()
+        return self._intrinsic
+
+
+def _python_atomic_load(array, index):
+    """``array[index]`` (a plain read: Python runs one kernel thread at a time under the GIL)."""
+    return array[index]
+
+
+def _python_atomic_store(array, index, value) -> None:
+    """``array[index] = value``."""
+    array[index] = value
+
+
+def _element_pointer(context, builder, array_type, array, index, index_type):
+    """Pointer to element ``index`` of a 1-D array in generated code."""
+    from numba.core import cgutils, types
+
+    ary = context.make_array(array_type)(context, builder, array)
+    position = context.cast(builder, index, index_type, types.intp)
+    return cgutils.get_item_pointer(context, builder, array_type, ary, [position])
+
+
+def _build_atomic_load() -> Any:
+    from numba.extending import intrinsic
+
+    @intrinsic
+    def atomic_load(typingctx, array, index):
+        signature = array.dtype(array, index)
+
+        def codegen(context, builder, sig, args):
+            pointer = _element_pointer(context, builder, sig.args[0], args[0], args[1], sig.args[1])
+            return builder.load_atomic(pointer, "seq_cst", sig.args[0].dtype.bitwidth // 8)
+
+        return signature, codegen
+
+    return atomic_load
+
+
+def _build_atomic_store() -> Any:
+    from numba.core import types
+    from numba.extending import intrinsic
+
+    @intrinsic
+    def atomic_store(typingctx, array, index, value):
+        signature = types.void(array, index, value)
+
+        def codegen(context, builder, sig, args):
+            array_type = sig.args[0]
+            pointer = _element_pointer(context, builder, array_type, args[0], args[1], sig.args[1])
+            stored = context.cast(builder, args[2], sig.args[2], array_type.dtype)
+            builder.store_atomic(stored, pointer, "seq_cst", array_type.dtype.bitwidth // 8)
+            return context.get_dummy_value()
+
+        return signature, codegen
+
+    return atomic_store
+
+
+#: ``atomic_load(array, index)``: ``array[index]`` (1-D array of integers), read as a
+#: sequentially consistent atomic load in a compiled kernel: a kernel spinning on a flag that
+#: another thread sets sees it (the compiler may not keep the value in a register), and what
+#: that thread wrote before setting it
+atomic_load = KernelIntrinsic(_python_atomic_load, _build_atomic_load)
+#: ``atomic_store(array, index, value)``: ``array[index] = value``, a sequentially consistent
+#: atomic store in a compiled kernel (what the thread wrote before it is seen by a thread that
+#: loads the value)
+atomic_store = KernelIntrinsic(_python_atomic_store, _build_atomic_store)
 
 
 class LazyKernel:
@@ -82,6 +178,8 @@ class LazyKernel:
                 namespace[name] = value.compiled()
             elif value is prange:
                 namespace[name] = numba.prange
+            elif isinstance(value, KernelIntrinsic):
+                namespace[name] = value.intrinsic()
         rebuilt = types.FunctionType(
             source.__code__, namespace, source.__name__, source.__defaults__, source.__closure__
         )

@@ -35,6 +35,7 @@ from typing import TypeVar
 import numpy as np
 
 __all__ = [
+    "cblas_sgemm",
     "fixed_order",
     "matmul",
     "parallel_map",
@@ -142,6 +143,53 @@ def _openblas_setter(path: str) -> Callable[[int], object] | None:
                 setter.argtypes = [ctypes.c_int]
                 setter.restype = None
                 return setter
+    return None
+
+
+#: ``cblas_sgemm``'s codes for row-major arrays and untransposed operands (``cblas.h``)
+CBLAS_ROW_MAJOR, CBLAS_NO_TRANS = 101, 111
+
+
+@functools.cache
+def cblas_sgemm():
+    """NumPy's own float32 matrix product, ``cblas_sgemm`` of the OpenBLAS its wheels bundle (or
+    of another OpenBLAS the process has loaded), as a ctypes function that compiled kernels
+    can call without the GIL; None where no OpenBLAS is found under these names.
+
+    ``sgemm(CBLAS_ROW_MAJOR, CBLAS_NO_TRANS, CBLAS_NO_TRANS, m, n, k, alpha, a, lda, b, ldb,
+    beta, c, ldc)`` with the arrays' addresses; its integers are 64-bit for the ``64_`` symbols
+    (an ILP64 build, NumPy's wheels), 32-bit otherwise. It is the function ``a @ b`` runs for
+    float32 arrays, with the thread count :func:`fixed_order` sets (one while texsyn computes).
+    """
+    import ctypes
+
+    from threadpoolctl import ThreadpoolController
+
+    libraries = [
+        lib.filepath
+        for lib in ThreadpoolController().lib_controllers
+        if lib.user_api == "blas" and lib.internal_api == "openblas"
+    ]
+    # NumPy's first (its wheels keep it in numpy.libs), then any other OpenBLAS loaded
+    libraries.sort(key=lambda path: not os.path.basename(os.path.dirname(path)).startswith("numpy"))
+    for path in libraries:
+        try:
+            library = ctypes.CDLL(path)
+        except OSError:
+            continue
+        for name, integer in (
+            ("scipy_cblas_sgemm64_", ctypes.c_int64),
+            ("cblas_sgemm64_", ctypes.c_int64),
+            ("scipy_cblas_sgemm", ctypes.c_int),
+            ("cblas_sgemm", ctypes.c_int),
+        ):
+            if hasattr(library, name):
+                code, real, address = ctypes.c_int, ctypes.c_float, ctypes.c_void_p
+                prototype = ctypes.CFUNCTYPE(
+                    None, code, code, code, integer, integer, integer, real, address, integer,
+                    address, integer, real, address, integer,
+                )  # fmt: skip
+                return prototype((name, library))
     return None
 
 

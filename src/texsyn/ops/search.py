@@ -23,17 +23,29 @@ once here and read side by side. The approximate tree search of Wei and Levoy is
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
 
 import numpy as np
 
-from .jit import jit, prange
-from .linalg import BLOCK_COLUMNS, BLOCK_ROWS, fixed_order, matmul, parallel_map, worker_count
+from .jit import atomic_load, atomic_store, jit, prange
+from .linalg import (
+    BLOCK_COLUMNS,
+    BLOCK_ROWS,
+    CBLAS_NO_TRANS,
+    CBLAS_ROW_MAJOR,
+    cblas_sgemm,
+    fixed_order,
+    matmul,
+    parallel_map,
+    worker_count,
+)
 from .patches import as_channels
 
 __all__ = [
     "knn_select",
     "BoundedNearestIndex",
+    "BoundedParallelSearch",
     "FFTPatchSearch",
     "NearestPatchIndex",
     "WeightedPatchBank",
@@ -827,6 +839,123 @@ def _bounded_chunk(
         overflow[i] = full
 
 
+@jit(nogil=True)
+def _search_part(
+    sgemm, lo, hi, chunk, proj32, proj32_t, gram, queries, bank, seeds, terms, q_ext, b_res, b_res2,
+    b_ext, b_errors, sigma, gamma_x, gamma_e, band, best_j, best_x, upper, keep_j, keep_x, kept, overflow,
+):  # fmt: skip
+    """Search the bank rows ``lo:hi`` for every query, a chunk of rows at a time, without the GIL.
+
+    Each chunk's float32 products come from ``sgemm`` (NumPy's ``cblas_sgemm``,
+    :func:`texsyn.ops.linalg.cblas_sgemm`) into ``gram`` (a flat buffer of at least
+    ``len(queries) * chunk`` values), then :func:`_bounded_chunk` screens them; ``terms`` are the
+    seven rows of the query side of the bounds (:meth:`BoundedNearestIndex._search_block`).
+    """
+    m, width_k = proj32.shape
+    for c0 in range(lo, hi, chunk):
+        c1 = min(hi, c0 + chunk)
+        width = c1 - c0
+        block = gram[: m * width].reshape((m, width))
+        sgemm(
+            CBLAS_ROW_MAJOR, CBLAS_NO_TRANS, CBLAS_NO_TRANS, m, width, width_k, np.float32(1.0),
+            proj32.ctypes.data, width_k, proj32_t[:, c0:].ctypes.data, proj32_t.shape[1],
+            np.float32(0.0), block.ctypes.data, width,
+        )  # fmt: skip
+        _bounded_chunk(
+            block, c0, queries, bank, seeds, terms[0], terms[2], terms[1], terms[3], terms[4], q_ext,
+            terms[5], terms[6], b_res, b_res2, b_ext, b_errors, sigma, gamma_x, gamma_e, band, best_j,
+            best_x, upper, keep_j, keep_x, kept, overflow,
+        )  # fmt: skip
+
+
+#: the words of a part worker's row of the control array (:class:`BoundedParallelSearch`):
+#: the job number asked, its number of queries, the job number done, stop, sleeping
+_JOB, _QUERIES, _DONE, _STOP, _SLEEPING = 0, 1, 2, 3, 4
+#: words per worker's row (a cache line of its own: no false sharing between workers)
+_CONTROL_WORDS = 8
+
+
+@jit(nogil=True)
+def _part_worker(
+    control, spins, sgemm, part, n_parts, n_seeds, lo, hi, chunk, proj32, proj32_t, gram, queries,
+    bank, seeds, terms, q_ext, b_res, b_res2, b_ext, b_errors, sigma, gamma_x, gamma_e, band, best_j,
+    best_x, upper, keep_j, keep_x, kept, overflow,
+):  # fmt: skip
+    """The loop a part worker thread stays in (:class:`BoundedParallelSearch`), without the GIL.
+
+    It watches its row of ``control``: a new job number (word ``_JOB``) asks for the search of
+    the bank rows ``lo:hi`` (:func:`_search_part`) for ``m = control[_QUERIES]`` queries, whose
+    arrays are the first values of the flat buffers (``proj32`` holds ``m x width`` values,
+    ``band`` ``m x 3``, ``terms`` ``7 x m``, the parts' state ``n_parts x m``, ...), and the
+    state of part ``part``; it reports the job done (word ``_DONE``). After ``spins`` reads
+    without a job it raises its ``_SLEEPING`` word, looks for a job once more (the caller
+    raises the job number, then reads that word: one of the two sees the other) and returns
+    False, to sleep until woken; it returns True when asked to stop.
+    """
+    d = bank.shape[1]
+    width_k = proj32_t.shape[0]
+    n_ext = b_ext.shape[1]
+    capacity = keep_j.shape[0] // best_j.shape[0]
+    atomic_store(control, _SLEEPING, 0)
+    idle = 0
+    while True:
+        job = atomic_load(control, _JOB)
+        if job != atomic_load(control, _DONE):
+            m = atomic_load(control, _QUERIES)
+            state = n_parts * m
+            _search_part(
+                sgemm, lo, hi, chunk, proj32[: m * width_k].reshape((m, width_k)), proj32_t, gram,
+                queries[: m * d].reshape((m, d)), bank, seeds[: m * n_seeds].reshape((m, n_seeds)),
+                terms[: 7 * m].reshape((7, m)), q_ext[: m * n_ext].reshape((m, n_ext)), b_res, b_res2,
+                b_ext, b_errors, sigma, gamma_x, gamma_e, band[: 3 * m].reshape((m, 3)),
+                best_j[:state].reshape((n_parts, m))[part], best_x[:state].reshape((n_parts, m))[part],
+                upper[:state].reshape((n_parts, m))[part],
+                keep_j[: state * capacity].reshape((n_parts, m, capacity))[part],
+                keep_x[: state * capacity].reshape((n_parts, m, capacity))[part],
+                kept[:state].reshape((n_parts, m))[part], overflow[:state].reshape((n_parts, m))[part],
+            )  # fmt: skip
+            atomic_store(control, _DONE, job)
+            idle = 0
+        elif atomic_load(control, _STOP) != 0:
+            return True
+        else:
+            idle += 1
+            if idle >= spins:
+                atomic_store(control, _SLEEPING, 1)
+                if (
+                    atomic_load(control, _JOB) == atomic_load(control, _DONE)
+                    and atomic_load(control, _STOP) == 0
+                ):
+                    return False
+                atomic_store(control, _SLEEPING, 0)
+                idle = 0
+
+
+@jit(nogil=True)
+def _post_job(control, job, m, sleeping):
+    """Ask every worker (a row of ``control``) for job ``job`` on ``m`` queries;
+    ``sleeping[w]``: whether worker ``w`` was asleep (to be woken)."""
+    for w in range(control.shape[0]):
+        row = control[w]
+        atomic_store(row, _QUERIES, m)
+        atomic_store(row, _JOB, job)
+        sleeping[w] = atomic_load(row, _SLEEPING) != 0
+
+
+@jit(nogil=True)
+def _await_job(control, job, spins):
+    """Wait, spinning, until every worker reports job ``job`` done; False after ``spins``
+    reads without it (the caller then checks that the workers still run)."""
+    for w in range(control.shape[0]):
+        row = control[w]
+        count = 0
+        while atomic_load(row, _DONE) != job:
+            count += 1
+            if count >= spins:
+                return False
+    return True
+
+
 @jit()
 def _bounded_merge(
     best_j, best_x, keep_j, keep_x, kept, overflow, gamma_x, bands, index, distance, counts, members
@@ -1039,6 +1168,7 @@ class BoundedNearestIndex:
         seeds: np.ndarray | None = None,
         *,
         members: bool = False,
+        workers: BoundedParallelSearch | None = None,
     ) -> tuple[np.ndarray, ...]:
         """Nearest bank row of every query, and how many rows may lie within each band.
 
@@ -1059,6 +1189,9 @@ class BoundedNearestIndex:
             Rows likely to be near each query (``-1``: none), for a tight first bound.
         members : bool
             Also return the rows counted in the first band.
+        workers : BoundedParallelSearch, optional
+            Worker threads of this index (:meth:`parallel_search`) that search the parts of the
+            bank instead of texsyn's thread pool (the same answers).
 
         Returns
         -------
@@ -1090,13 +1223,17 @@ class BoundedNearestIndex:
         counts = np.empty((n, bands.shape[1]), dtype=np.int64)
         gamma_x = 1.01 * _gamma(d + 3, _U64)
         gamma_e = 1.01 * _gamma(self.basis.shape[1] + 3, _U64)
-        n_parts = self._parts(min(n, self.block))  # (bounded_query_bytes counts this buffer)
+        if workers is not None and workers.serves(min(n, self.block), seeds.shape[1]):
+            n_parts = workers.n_parts
+        else:
+            n_parts = self._parts(min(n, self.block))  # (bounded_query_bytes counts this buffer)
         found = np.empty((n, n_parts * self.capacity), dtype=np.int64)
         for start in range(0, n, self.block):
             stop = min(n, start + self.block)
             self._search_block(
                 queries[start:stop], seeds[start:stop], bands[start:stop], gamma_x, gamma_e,
                 index[start:stop], distance[start:stop], counts[start:stop], found[start:stop], n_parts,
+                workers,
             )  # fmt: skip
         if members:
             return index, distance, counts, found
@@ -1119,26 +1256,31 @@ class BoundedNearestIndex:
         counts: np.ndarray,
         members: np.ndarray,
         n_parts: int,
+        workers: BoundedParallelSearch | None = None,
     ) -> None:
-        """:meth:`query` of one block of queries, the bank cut into ``n_parts`` parts searched in parallel."""
+        """:meth:`query` of one block of queries, the bank cut into ``n_parts`` parts searched in
+        parallel (by ``workers`` when they serve this many parts, else by
+        :func:`~texsyn.ops.linalg.parallel_map`)."""
         k, m = len(self), q.shape[0]
-        edges = [16 * (k * p // (16 * n_parts)) for p in range(n_parts)] + [k]
+        edges = _part_edges(k, n_parts)
         centred = q - self.mean
         full = centred @ self.basis
         dim, coords = self.basis.shape
-        proj32 = np.empty((m, self.dims + 1), dtype=np.float32)
-        q_ext = np.empty((m, coords - self.dims))
-        band = np.empty((m, 3))
-        terms = np.empty((7, m))  # q_sq, l_err, q_err, q_res, q_res_err, q_res2, q_res2_err
-        best_j = np.empty((n_parts, m), dtype=np.int64)
-        best_x = np.empty((n_parts, m))
-        upper = np.empty((n_parts, m))
-        keep_j = np.empty((n_parts, m, self.capacity), dtype=np.int64)
-        keep_x = np.empty((n_parts, m, self.capacity))
-        kept = np.empty((n_parts, m), dtype=np.int64)
-        overflow = np.zeros((n_parts, m), dtype=np.bool_)
-        # the query's side of the bounds (:meth:`_side_terms`, the same formulas), and the
-        # seeds, once: their rows are kept by part 0, their bound starts every part
+        served = workers is not None and n_parts == workers.n_parts and workers.serves(m, seeds.shape[1])
+        buffers = (
+            workers.buffers  # type: ignore[union-attr]
+            if served
+            else _SearchBuffers(
+                m, n_parts, self.dims + 1, coords - self.dims, 0, 0, self.capacity, self.chunk
+            )
+        )
+        (proj32, q_ext, band, terms, best_j, best_x, upper, keep_j, keep_x, kept, overflow) = buffers.views(m)
+        overflow[...] = False
+        if served:  # the workers read the queries and seeds from their buffers
+            q, seeds = buffers.copy_in(q, seeds)
+        # the query's side of the bounds (:meth:`_side_terms`, the same formulas; rows of
+        # terms: q_sq, l_err, q_err, q_res, q_res_err, q_res2, q_res2_err), and the seeds,
+        # once: their rows are kept by part 0, their bound starts every part
         _bounded_prepare(
             centred, full, self.dims, _gamma(self.dims + 4, _U32), self._proj_max,
             1.2 * (_U32 + np.sqrt(coords) * _gamma(dim + 3, _U64)) * self._sigma,
@@ -1146,10 +1288,19 @@ class BoundedNearestIndex:
             bands, proj32, q_ext, terms, band,
             q, self.bank, seeds, gamma_x, best_j, best_x, upper, keep_j, keep_x, kept,
         )  # fmt: skip
-        q_sq, l_err, q_err, q_res, q_res_err, q_res2, q_res2_err = terms
+        sgemm = cblas_sgemm()
 
         def search_part(p: int) -> None:
             lo, hi = edges[p], edges[p + 1]
+            if sgemm is not None:  # one compiled call, the products included
+                _search_part(
+                    sgemm, lo, hi, self.chunk, proj32, self._proj32_t, buffers.gram[p], q, self.bank,
+                    seeds, terms, q_ext, self._b_res, self._b_res2, self._b_ext, self._b_errors,
+                    self._sigma, gamma_x, gamma_e, band, best_j[p], best_x[p], upper[p], keep_j[p],
+                    keep_x[p], kept[p], overflow[p],
+                )  # fmt: skip
+                return
+            q_sq, l_err, q_err, q_res, q_res_err, q_res2, q_res2_err = terms
             for c0 in range(lo, hi, self.chunk):
                 c1 = min(hi, c0 + self.chunk)
                 _bounded_chunk(
@@ -1160,16 +1311,223 @@ class BoundedNearestIndex:
                     keep_x[p], kept[p], overflow[p],
                 )  # fmt: skip
 
-        parallel_map(search_part, range(n_parts))
+        if served:
+            workers.run(m, search_part)  # type: ignore[union-attr]
+        else:
+            parallel_map(search_part, range(n_parts))
         _bounded_merge(
             best_j, best_x, keep_j, keep_x, kept, overflow, gamma_x, bands, index, distance, counts, members
         )  # fmt: skip
 
+    def parallel_search(self, queries: int, seeds: int) -> BoundedParallelSearch:
+        """Workers for many :meth:`query` calls of up to ``queries`` queries with ``seeds`` seeds
+        each (a context manager, passed as ``query(..., workers=...)``;
+        :class:`BoundedParallelSearch`)."""
+        return BoundedParallelSearch(self, queries, seeds)
 
-def _bank_parts(queries: float, rows: float) -> int:
+
+def _part_edges(rows: int, n_parts: int) -> list[int]:
+    """The first bank row of every part (multiples of 16), then ``rows``."""
+    return [16 * (rows * p // (16 * n_parts)) for p in range(n_parts)] + [rows]
+
+
+class _SearchBuffers:
+    """The arrays of a :class:`BoundedNearestIndex` search of at most ``queries`` queries, the
+    bank cut in ``n_parts`` parts, each a flat buffer whose first values hold the arrays of a
+    block of ``m`` queries (:meth:`views`): the same buffers serve blocks of every size, so
+    that a part worker can stay in one compiled call (:class:`BoundedParallelSearch`).
+    ``width``: values of a projected query (the projection and 1), ``n_ext``: its next
+    coordinates; ``n_seeds`` and ``dim`` size the copies of the seeds and queries (0: none).
+    """
+
+    def __init__(
+        self,
+        queries: int,
+        n_parts: int,
+        width: int,
+        n_ext: int,
+        n_seeds: int,
+        dim: int,
+        capacity: int,
+        chunk: int,
+    ) -> None:
+        self.n_parts, self.width, self.n_ext, self.n_seeds, self.dim = n_parts, width, n_ext, n_seeds, dim
+        self.capacity = capacity
+        self.proj32 = np.empty(queries * width, dtype=np.float32)
+        self.q_ext = np.empty(queries * n_ext)
+        self.band = np.empty(queries * 3)
+        self.terms = np.empty(7 * queries)
+        self.best_j = np.empty(n_parts * queries, dtype=np.int64)
+        self.best_x = np.empty(n_parts * queries)
+        self.upper = np.empty(n_parts * queries)
+        self.keep_j = np.empty(n_parts * queries * capacity, dtype=np.int64)
+        self.keep_x = np.empty(n_parts * queries * capacity)
+        self.kept = np.empty(n_parts * queries, dtype=np.int64)
+        self.overflow = np.empty(n_parts * queries, dtype=np.bool_)
+        self.gram = np.empty((n_parts, queries * chunk), dtype=np.float32)  # each part's products
+        self.queries = np.empty(queries * dim)
+        self.seeds = np.empty(queries * n_seeds, dtype=np.int64)
+
+    def views(self, m: int) -> tuple[np.ndarray, ...]:
+        """``proj32 (m, width)``, ``q_ext (m, n_ext)``, ``band (m, 3)``, ``terms (7, m)``, and the
+        parts' state: ``best_j, best_x, upper (P, m)``, ``keep_j, keep_x (P, m, capacity)``,
+        ``kept, overflow (P, m)``."""
+        p, c = self.n_parts, self.capacity
+        return (
+            self.proj32[: m * self.width].reshape(m, self.width),
+            self.q_ext[: m * self.n_ext].reshape(m, self.n_ext),
+            self.band[: 3 * m].reshape(m, 3),
+            self.terms[: 7 * m].reshape(7, m),
+            self.best_j[: p * m].reshape(p, m),
+            self.best_x[: p * m].reshape(p, m),
+            self.upper[: p * m].reshape(p, m),
+            self.keep_j[: p * m * c].reshape(p, m, c),
+            self.keep_x[: p * m * c].reshape(p, m, c),
+            self.kept[: p * m].reshape(p, m),
+            self.overflow[: p * m].reshape(p, m),
+        )
+
+    def copy_in(self, queries: np.ndarray, seeds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The queries and seeds copied to the buffers, as ``(m, dim)`` and ``(m, n_seeds)`` views."""
+        m = queries.shape[0]
+        q = self.queries[: m * self.dim].reshape(m, self.dim)
+        q[...] = queries
+        s = self.seeds[: m * self.n_seeds].reshape(m, self.n_seeds)
+        s[...] = seeds
+        return q, s
+
+
+#: (query, row) pairs of a block from which :class:`BoundedParallelSearch`'s workers take
+#: parts of the bank: their hand-over costs a few microseconds, not the 0.1 ms of a woken
+#: thread (:data:`PARALLEL_PAIRS`); level 1 of Wei and Levoy's default 128x128 exemplar (26
+#: queries against 4096 rows) is cut in two
+WORKER_PAIRS = 1 << 15
+#: reads of its control word a part worker makes without a job before it sleeps (about a
+#: millisecond on the benchmark machine: longer than the work between two wavefronts)
+SPIN_READS = 1 << 21
+
+
+class BoundedParallelSearch:
+    """Worker threads that search parts of a :class:`BoundedNearestIndex`'s bank for a caller
+    making many small queries (Wei and Levoy's wavefronts: one query of about 50 rows every
+    millisecond), handed their jobs through memory rather than woken each time.
+
+    Handing a part to a sleeping thread costs about 0.1 ms on a virtual machine (its core is
+    woken, then the GIL changes hands), as much as a tenth of the search it runs. Here each
+    worker (one per part beyond the first, which the caller's thread searches) stays in a
+    compiled loop without the GIL (:func:`_part_worker`): it reads its control word until a
+    job is posted, searches its rows (the float32 products through NumPy's ``cblas_sgemm``,
+    :func:`_search_part`) in buffers shared with the caller (:class:`_SearchBuffers`), and
+    posts the job done; after :data:`SPIN_READS` reads without a job (about a millisecond)
+    it sleeps until the next one. The answers are the same rows as without the workers (the
+    parts are the same, and every part's answer is proven; ``tests/test_ops_bounded_search.py``).
+
+    A context manager: the threads start on entry and are stopped and joined on exit (also on
+    an error, after the job in progress). Blocks of another number of parts (too few pairs:
+    :data:`PARALLEL_PAIRS`), of more queries than ``queries`` or of another number of seeds
+    are searched as without workers. Where NumPy's ``cblas_sgemm`` is not found
+    (:func:`texsyn.ops.linalg.cblas_sgemm`) or one part would do, there are no workers.
+
+    Parameters
+    ----------
+    index : BoundedNearestIndex
+    queries : int
+        The most queries of a block that the workers serve (at most the index's ``block``).
+    seeds : int
+        Seeds per query of the blocks they serve.
+    """
+
+    def __init__(self, index: BoundedNearestIndex, queries: int, seeds: int) -> None:
+        self.index = index
+        self.queries = max(1, min(int(queries), index.block))
+        self.n_seeds = int(seeds)
+        self.n_parts = _bank_parts(self.queries, len(index), WORKER_PAIRS)
+        self.sgemm = cblas_sgemm()
+        self.active = self.n_parts > 1 and self.sgemm is not None
+        self._threads: list[threading.Thread] = []
+        self._wake: list[threading.Event] = []
+        self._errors: list[BaseException] = []
+        self._job = 0
+        if not self.active:
+            return
+        dim, coords = index.basis.shape
+        self.buffers = _SearchBuffers(
+            self.queries, self.n_parts, index.dims + 1, coords - index.dims, self.n_seeds, dim,
+            index.capacity, index.chunk,
+        )  # fmt: skip
+        self._control = np.zeros((self.n_parts - 1, _CONTROL_WORDS), dtype=np.int64)
+        self._sleeping = np.zeros(self.n_parts - 1, dtype=np.bool_)
+
+    def serves(self, m: int, n_seeds: int) -> bool:
+        """Whether the workers search blocks of ``m`` queries with ``n_seeds`` seeds (in
+        :attr:`n_parts` parts): not too many queries, enough (query, row) pairs
+        (:data:`WORKER_PAIRS`), the seeds they were made for."""
+        return (
+            self.active
+            and bool(self._threads)
+            and m <= self.queries
+            and m * len(self.index) >= WORKER_PAIRS
+            and n_seeds == self.n_seeds
+        )
+
+    def __enter__(self) -> BoundedParallelSearch:
+        if self.active:
+            for w in range(self.n_parts - 1):
+                self._wake.append(threading.Event())
+                thread = threading.Thread(target=self._serve, args=(w,), name="texsyn-part", daemon=True)
+                thread.start()
+                self._threads.append(thread)
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        for w in range(len(self._threads)):
+            self._control[w, _STOP] = 1
+            self._wake[w].set()
+        for thread in self._threads:
+            thread.join()
+        self._threads = []
+
+    def _serve(self, w: int) -> None:
+        """A worker thread: the compiled loop, and sleeps between its runs."""
+        index = self.index
+        b = self.buffers
+        gamma_x = 1.01 * _gamma(index.bank.shape[1] + 3, _U64)
+        gamma_e = 1.01 * _gamma(index.basis.shape[1] + 3, _U64)
+        part = w + 1
+        edges = _part_edges(len(index), self.n_parts)
+        control = self._control[w]
+        try:
+            while not _part_worker(
+                control, SPIN_READS, self.sgemm, part, self.n_parts, self.n_seeds, edges[part],
+                edges[part + 1], index.chunk, b.proj32, index._proj32_t, b.gram[part], b.queries,
+                index.bank, b.seeds, b.terms, b.q_ext, index._b_res, index._b_res2, index._b_ext,
+                index._b_errors, index._sigma, gamma_x, gamma_e, b.band, b.best_j, b.best_x, b.upper,
+                b.keep_j, b.keep_x, b.kept, b.overflow,
+            ):  # fmt: skip
+                self._wake[w].wait()
+                self._wake[w].clear()
+        except BaseException as error:  # reported to the caller by run()
+            self._errors.append(error)
+
+    def run(self, m: int, search_part: Callable[[int], None]) -> None:
+        """Post a job of ``m`` queries to the workers, search part 0 with ``search_part(0)`` on
+        this thread, and wait for the workers' parts."""
+        self._job += 1
+        _post_job(self._control, self._job, m, self._sleeping)
+        for w in np.flatnonzero(self._sleeping):
+            self._wake[w].set()
+        search_part(0)
+        while not _await_job(self._control, self._job, SPIN_READS * 16):
+            if self._errors:
+                raise RuntimeError("a search worker failed") from self._errors[0]
+            if not all(thread.is_alive() for thread in self._threads):  # pragma: no cover
+                raise RuntimeError("a search worker stopped")
+
+
+def _bank_parts(queries: float, rows: float, pairs: int = PARALLEL_PAIRS) -> int:
     """:meth:`BoundedNearestIndex._parts`: one part per worker, of at least 1024 rows, when a
-    block of ``queries`` makes at least :data:`PARALLEL_PAIRS` (query, row) pairs."""
-    if queries * rows < PARALLEL_PAIRS:
+    block of ``queries`` makes at least ``pairs`` (query, row) pairs (:data:`PARALLEL_PAIRS`)."""
+    if queries * rows < pairs:
         return 1
     return max(1, min(worker_count(), int(rows) // 1024))
 
@@ -1260,6 +1618,7 @@ def nearest_rows_bounded(
     index: BoundedNearestIndex,
     seeds: np.ndarray | None = None,
     isolated: np.ndarray | None = None,
+    workers: BoundedParallelSearch | None = None,
 ) -> np.ndarray:
     """:func:`nearest_rows`, the same rows, through a :class:`BoundedNearestIndex` of ``bank``.
 
@@ -1284,6 +1643,9 @@ def nearest_rows_bounded(
             Likely rows, passed to :meth:`BoundedNearestIndex.query`.
         isolated : ndarray of bool, shape (K,), optional
             The bank rows with no other row within their band.
+        workers : BoundedParallelSearch, optional
+            The index's part workers (:meth:`BoundedNearestIndex.parallel_search`), for a
+            caller that makes many small searches.
     """
     queries = np.ascontiguousarray(queries, dtype=np.float64)
     n = queries.shape[0]
@@ -1300,7 +1662,7 @@ def nearest_rows_bounded(
         rest = rest[:count]
         sub = queries if every else queries[rest]
         sub_seeds = None if seeds is None else seeds if every else seeds[rest]
-        found, _, counts, members = index.query(sub, bands[:count], sub_seeds, members=True)
+        found, _, counts, members = index.query(sub, bands[:count], sub_seeds, members=True, workers=workers)
         best[rest] = found
         tied = np.flatnonzero(counts[:, 0] != 1)
         if tied.size:

@@ -1,0 +1,149 @@
+"""The part workers of the proven search (texsyn.ops.search.BoundedParallelSearch).
+
+They hand jobs through memory to threads that stay in a compiled loop; the answers must be
+the ones of the search without them, whatever the block sizes, and the threads must end.
+"""
+
+import threading
+
+import numpy as np
+import pytest
+
+import texsyn.ops.search as search
+from texsyn.ops.jit import atomic_load, atomic_store, jit
+from texsyn.ops.linalg import CBLAS_NO_TRANS, CBLAS_ROW_MAJOR, cblas_sgemm, fixed_order
+from texsyn.ops.search import BoundedNearestIndex, nearest_rows, nearest_rows_bounded
+
+
+def _bank(rng, k, d):
+    return rng.random((k, 4)) @ rng.random((4, d)) + 0.05 * rng.random((k, d))
+
+
+def _blocks(rng, bank, sizes):
+    for m in sizes:
+        rows = rng.integers(0, len(bank), m)
+        queries = bank[rows] + 0.02 * rng.standard_normal((m, bank.shape[1]))
+        seeds = np.stack([rows, rng.integers(-1, len(bank), m)], axis=1)
+        yield queries, seeds
+
+
+def _part_threads():
+    return [t for t in threading.enumerate() if t.name == "texsyn-part"]
+
+
+@pytest.fixture
+def three_parts(monkeypatch):
+    monkeypatch.setattr(search, "worker_count", lambda: 3)
+    monkeypatch.setattr(search, "WORKER_PAIRS", 0)
+
+
+@pytest.mark.parametrize("spin_reads", [search.SPIN_READS, 1])
+def test_workers_give_the_answers_of_the_search_without_them(three_parts, monkeypatch, spin_reads):
+    # spin_reads=1: the workers sleep after every job and are woken for the next one
+    monkeypatch.setattr(search, "SPIN_READS", spin_reads)
+    rng = np.random.default_rng(0)
+    bank = _bank(rng, 4096, 40)
+    index = BoundedNearestIndex(bank, dims=12, extra=12, chunk=512)
+    bands = lambda m: np.full((m, 1), 1e-3)  # noqa: E731
+    with fixed_order(), index.parallel_search(60, 2) as workers:
+        assert workers.active and workers.n_parts == 3 and len(_part_threads()) == 2
+        done = 0
+        for queries, seeds in _blocks(rng, bank, [1, 7, 60, 33, 61, 300, 2]):
+            got = index.query(queries, bands(len(queries)), seeds, members=True, workers=workers)
+            want = index.query(queries, bands(len(queries)), seeds, members=True)
+            for a, b in zip(got[:3], want[:3], strict=True):
+                assert np.array_equal(a, b)
+            for i, count in enumerate(got[2][:, 0]):  # the same members, whatever the parts
+                assert sorted(got[3][i, :count]) == sorted(want[3][i, :count])
+            # blocks of the index's 256 queries at most; more than 60: not the workers'
+            done += sum(min(256, len(queries) - start) <= 60 for start in range(0, len(queries), 256))
+        assert workers._job == done
+    assert not _part_threads()
+
+
+def test_wei_levoy_wavefronts_with_workers_give_the_plain_search_bytes(three_parts, monkeypatch):
+    import texsyn
+    import texsyn.methods.wei_levoy as wl
+
+    ex = np.stack([texsyn.data.exemplar(n, size=64) for n in ("grass", "gravel", "brick")], -1)
+    params = {"levels": 2, "window": 5, "parent_window": 3}
+    jobs = []
+    run = search.BoundedParallelSearch.run
+    monkeypatch.setattr(search.BoundedParallelSearch, "run", lambda self, *a: (jobs.append(1), run(self, *a)))
+    got = texsyn.make_method("wei_levoy", **params).fit(ex).sample_with_map((72, 80), rng=3)
+    assert len(jobs) > 50  # the finest level's wavefronts went to the workers
+    monkeypatch.setattr(wl, "BOUNDED_SEARCH_ROWS", 10**9)
+    want = texsyn.make_method("wei_levoy", **params).fit(ex).sample_with_map((72, 80), rng=3)
+    assert np.array_equal(got.image, want.image) and np.array_equal(got.source_map, want.source_map)
+    assert not _part_threads()
+
+
+def test_without_numpys_sgemm_there_are_no_workers_and_the_same_answers(three_parts, monkeypatch):
+    rng = np.random.default_rng(1)
+    bank = _bank(rng, 3072, 30)
+    norms = np.sum(bank * bank, axis=1)
+    index = BoundedNearestIndex(bank, dims=8, extra=8)
+    queries, seeds = next(_blocks(rng, bank, [40]))
+    with fixed_order():
+        with index.parallel_search(40, 2) as workers:
+            fast = nearest_rows_bounded(queries, bank, norms, index, seeds, workers=workers)
+        monkeypatch.setattr(search, "cblas_sgemm", lambda: None)  # the products by NumPy, per chunk
+        with index.parallel_search(40, 2) as workers:
+            assert not workers.active and not _part_threads()
+            plain = nearest_rows_bounded(queries, bank, norms, index, seeds, workers=workers)
+        assert np.array_equal(fast, plain) and np.array_equal(fast, nearest_rows(queries, bank, norms))
+
+
+def test_a_failing_worker_is_reported_and_the_others_end(three_parts, monkeypatch):
+    def broken(*args):
+        raise MemoryError("no memory for the worker")
+
+    monkeypatch.setattr(search, "_part_worker", broken)
+    monkeypatch.setattr(search, "SPIN_READS", 1)
+    rng = np.random.default_rng(2)
+    bank = _bank(rng, 4096, 20)
+    index = BoundedNearestIndex(bank, dims=8, extra=8)
+    queries, seeds = next(_blocks(rng, bank, [30]))
+    with pytest.raises(RuntimeError, match="search worker failed"):
+        with fixed_order(), index.parallel_search(30, 2) as workers:
+            index.query(queries, np.zeros((30, 1)), seeds, workers=workers)
+    assert not _part_threads()
+
+
+@jit(nogil=True)
+def _wait_for_flag(flag, limit):
+    """Spin until ``flag[0]`` is set (or ``limit`` reads), then report the reads in ``flag[1]``."""
+    reads = 0
+    while atomic_load(flag, 0) == 0 and reads < limit:
+        reads += 1
+    atomic_store(flag, 1, reads + 1)
+
+
+def test_a_compiled_kernel_spinning_on_an_atomic_load_sees_another_threads_store():
+    _wait_for_flag(np.ones(8, dtype=np.int64), 1)  # compiled (or loaded) before the race
+    flag = np.zeros(8, dtype=np.int64)
+    limit = 1 << 62  # without the atomic load the compiler may read the flag once: no end
+    thread = threading.Thread(target=_wait_for_flag, args=(flag, limit), daemon=True)
+    thread.start()
+    atomic_store(flag, 0, 1)  # (a plain store from Python)
+    thread.join(timeout=30)
+    assert not thread.is_alive() and 0 < flag[1] < limit
+    plain = np.zeros(8, dtype=np.int64)
+    _wait_for_flag.py_func(plain, 5)  # as Python: plain reads and writes
+    assert plain[1] == 6
+
+
+def test_cblas_sgemm_is_numpys_float32_product():
+    sgemm = cblas_sgemm()
+    if sgemm is None:
+        pytest.skip("NumPy's BLAS is not an OpenBLAS with the wheels' symbols")
+    rng = np.random.default_rng(3)
+    a = rng.random((43, 33), dtype=np.float32)
+    b = rng.random((33, 5000), dtype=np.float32)
+    out = np.empty((43, 700), dtype=np.float32)
+    with fixed_order():
+        sgemm(
+            CBLAS_ROW_MAJOR, CBLAS_NO_TRANS, CBLAS_NO_TRANS, 43, 700, 33, 1.0, a.ctypes.data, 33,
+            b[:, 1000:].ctypes.data, 5000, 0.0, out.ctypes.data, 700,
+        )  # fmt: skip
+        assert np.array_equal(out, a @ b[:, 1000:1700])
