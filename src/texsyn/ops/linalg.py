@@ -19,6 +19,11 @@ give the same bytes. texsyn therefore fixes the order of every reduction itself
 
 Numba ``prange`` loops in texsyn write independent outputs (no cross-iteration sums), and the
 FFTs (NumPy's pocketfft) are single-threaded, so neither depends on the thread count.
+
+Why this module is long: it is the one place that knows how BLAS and texsyn's threads meet:
+the BLAS thread setting (:func:`fixed_order`), texsyn's thread pool and its helper threads
+(:func:`parallel_map`), the tiled products that rely on both (:func:`matmul`), and NumPy's
+own float32 product for compiled kernels that run without the GIL (:func:`cblas_sgemm`).
 """
 
 from __future__ import annotations
@@ -263,7 +268,7 @@ def parallel_map(function: Callable, items) -> list:
     For work that releases the GIL (NumPy sorts, FFTs, BLAS): each item is computed the same
     way whichever thread runs it, so the results do not depend on the number of workers. The
     calling thread computes the first item itself while the pool takes the others (one
-    hand-over fewer per call: Wei and Levoy's search makes one call per wavefront). An error
+    hand-over fewer per call: a search cut in parts makes one call per block of queries). An error
     is the first failing item's in item order, as in the loop; before it is raised, the
     items not started are cancelled and the running ones awaited (no work of the call goes
     on writing into the caller's arrays behind its exception).
@@ -298,7 +303,8 @@ def parallel_map(function: Callable, items) -> list:
 class _Helper:
     """A thread that runs one item at a time for :func:`parallel_map`, handed over by two locks
     (a wait on a lock releases the GIL; no future, no queue: about 10 µs a hand-over against
-    the pool's 70 on a 2-core virtual machine, once per wavefront in Wei and Levoy's search)."""
+    the pool's 70 on a 2-core virtual machine; a caller making hundreds of such calls a second
+    keeps workers in a compiled loop instead: :class:`texsyn.ops.search.BoundedParallelSearch`)."""
 
     def __init__(self) -> None:
         self._go = threading.Lock()
