@@ -5,6 +5,7 @@ the ones of the search without them, whatever the block sizes, and the threads m
 """
 
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -106,7 +107,9 @@ def test_a_failing_worker_is_reported_and_the_others_end(three_parts, monkeypatc
     queries, seeds = next(_blocks(rng, bank, [30]))
     with pytest.raises(RuntimeError, match="search worker failed"):
         with fixed_order(), index.parallel_search(30, 2) as workers:
-            index.query(queries, np.zeros((30, 1)), seeds, workers=workers)
+            for _ in range(100):  # (the parts of a worker not started yet are the caller's)
+                index.query(queries, np.zeros((30, 1)), seeds, workers=workers)
+                time.sleep(0.01)
     assert not _part_threads()
 
 
@@ -147,3 +150,85 @@ def test_cblas_sgemm_is_numpys_float32_product():
             b[:, 1000:].ctypes.data, 5000, 0.0, out.ctypes.data, 700,
         )  # fmt: skip
         assert np.array_equal(out, a @ b[:, 1000:1700])
+
+
+def _index_and_block(seed):
+    rng = np.random.default_rng(seed)
+    bank = _bank(rng, 4096, 20)
+    index = BoundedNearestIndex(bank, dims=8, extra=8)
+    queries, seeds = next(_blocks(rng, bank, [30]))
+    return index, queries, -np.ones_like(seeds)  # no seeds: every part searched in earnest
+
+
+def test_the_caller_searches_the_parts_no_worker_has_claimed(three_parts, monkeypatch):
+    # a worker that the system does not run (other processes on the cores) costs no wait
+    release = threading.Event()
+    monkeypatch.setattr(search, "_part_worker", lambda *args: release.wait(10) or True)
+    index, queries, seeds = _index_and_block(4)
+    bands = np.full((30, 1), 1e-3)
+    answers = []
+    with fixed_order():
+        want = index.query(queries, bands, seeds)
+        with index.parallel_search(30, 2) as workers:
+            caller = threading.Thread(
+                target=lambda: answers.append(index.query(queries, bands, seeds, workers=workers)),
+                daemon=True,
+            )
+            caller.start()
+            caller.join(timeout=5)
+            finished = not caller.is_alive()
+            release.set()
+            caller.join(timeout=10)
+    assert finished and workers._job == 1
+    assert all(np.array_equal(a, b) for a, b in zip(answers[0], want, strict=True))
+    assert not _part_threads()
+
+
+def test_an_error_in_part_0_waits_for_the_parts_the_workers_claimed(three_parts, monkeypatch):
+    from texsyn.ops.jit import atomic_compare_exchange
+
+    def slow_worker(control, *args):  # claims its job, then takes 0.2 s over it
+        while control[search._JOB] == control[search._CLAIMED]:
+            if control[search._STOP]:
+                return True
+            time.sleep(0.001)
+        job = control[search._JOB]
+        assert atomic_compare_exchange(control, search._CLAIMED, job - 1, job)
+        time.sleep(0.2)
+        control[search._DONE] = job
+        return False
+
+    def failing_part(p):
+        while not np.all(workers._control[:, search._CLAIMED] == 1):
+            time.sleep(0.001)
+        raise ValueError("part 0 failed")
+
+    monkeypatch.setattr(search, "_part_worker", slow_worker)
+    index, _, _ = _index_and_block(5)
+    with index.parallel_search(30, 2) as workers:
+        with pytest.raises(ValueError, match="part 0 failed"):
+            workers.run(30, failing_part)
+        # no worker goes on writing into the buffers behind the error
+        assert np.all(workers._control[:, search._DONE] == 1)
+    assert not _part_threads()
+
+
+def test_workers_of_another_index_are_refused(three_parts):
+    index, queries, seeds = _index_and_block(6)
+    other, _, _ = _index_and_block(7)
+    with fixed_order(), other.parallel_search(30, 2) as workers:
+        with pytest.raises(ValueError, match="another index"):
+            index.query(queries, np.full((30, 1), 1e-3), seeds, workers=workers)
+
+
+def test_the_workers_may_be_entered_again(three_parts):
+    index, queries, seeds = _index_and_block(8)
+    bands = np.full((30, 1), 1e-3)
+    with fixed_order():
+        want = index.query(queries, bands, seeds)[0]
+        workers = index.parallel_search(30, 2)
+        for _ in range(2):
+            with workers:
+                assert np.array_equal(index.query(queries, bands, seeds, workers=workers)[0], want)
+                assert workers._job == 1 and len(_part_threads()) == 2
+            assert not _part_threads()

@@ -8,8 +8,9 @@ function with ``numba.njit(cache=True)`` when it is first called.
 
 A kernel may call another kernel of its module, a parallel kernel loops over
 :data:`prange` (``range`` until compiled, numba's ``prange`` in the compiled code), and a
-kernel that threads share reads and writes their flags with :data:`atomic_load` and
-:data:`atomic_store` (:class:`KernelIntrinsic`: plain indexing until compiled): at compile
+kernel that threads share reads and writes their flags with :data:`atomic_load`,
+:data:`atomic_store` and :data:`atomic_compare_exchange` (:class:`KernelIntrinsic`: plain
+indexing until compiled): at compile
 time the function is rebuilt over a copy of its module's namespace in which these are
 replaced by what numba compiles (numba reads global values as compile-time constants
 anyway).
@@ -24,7 +25,7 @@ import types
 from collections.abc import Callable
 from typing import Any
 
-__all__ = ["LazyKernel", "atomic_load", "atomic_store", "jit", "prange"]
+__all__ = ["LazyKernel", "atomic_compare_exchange", "atomic_load", "atomic_store", "jit", "prange"]
 
 #: the parallel loop of a kernel: ``range`` in Python, numba's ``prange`` once compiled
 prange = range
@@ -66,6 +67,20 @@ def _python_atomic_load(array, index):
 def _python_atomic_store(array, index, value) -> None:
     """``array[index] = value``."""
     array[index] = value
+
+
+#: makes the Python form of :data:`atomic_compare_exchange` one step for Python threads
+_exchange_lock = threading.Lock()
+
+
+def _python_atomic_compare_exchange(array, index, expected, value) -> bool:
+    """``array[index] = value`` if it holds ``expected`` (under a lock: one step for the threads
+    that run kernels as Python); whether it did."""
+    with _exchange_lock:
+        if array[index] != expected:
+            return False
+        array[index] = value
+        return True
 
 
 def _element_pointer(context, builder, array_type, array, index, index_type):
@@ -113,6 +128,27 @@ def _build_atomic_store() -> Any:
     return atomic_store
 
 
+def _build_atomic_compare_exchange() -> Any:
+    from numba.core import types
+    from numba.extending import intrinsic
+
+    @intrinsic
+    def atomic_compare_exchange(typingctx, array, index, expected, value):
+        signature = types.boolean(array, index, expected, value)
+
+        def codegen(context, builder, sig, args):
+            array_type = sig.args[0]
+            pointer = _element_pointer(context, builder, array_type, args[0], args[1], sig.args[1])
+            old = context.cast(builder, args[2], sig.args[2], array_type.dtype)
+            new = context.cast(builder, args[3], sig.args[3], array_type.dtype)
+            pair = builder.cmpxchg(pointer, old, new, "seq_cst", "seq_cst")
+            return builder.extract_value(pair, 1)
+
+        return signature, codegen
+
+    return atomic_compare_exchange
+
+
 #: ``atomic_load(array, index)``: ``array[index]`` (1-D array of integers), read as a
 #: sequentially consistent atomic load in a compiled kernel: a kernel spinning on a flag that
 #: another thread sets sees it (the compiler may not keep the value in a register), and what
@@ -122,6 +158,11 @@ atomic_load = KernelIntrinsic(_python_atomic_load, _build_atomic_load)
 #: atomic store in a compiled kernel (what the thread wrote before it is seen by a thread that
 #: loads the value)
 atomic_store = KernelIntrinsic(_python_atomic_store, _build_atomic_store)
+#: ``atomic_compare_exchange(array, index, expected, value)``: ``array[index] = value`` if it
+#: holds ``expected``, and whether it did, in one sequentially consistent atomic step in a
+#: compiled kernel: of two threads that both expect the value, one only sets it (a job claimed
+#: by one thread)
+atomic_compare_exchange = KernelIntrinsic(_python_atomic_compare_exchange, _build_atomic_compare_exchange)
 
 
 class LazyKernel:

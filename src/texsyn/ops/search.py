@@ -28,7 +28,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .jit import atomic_load, atomic_store, jit, prange
+from .jit import atomic_compare_exchange, atomic_load, atomic_store, jit, prange
 from .linalg import (
     BLOCK_COLUMNS,
     BLOCK_ROWS,
@@ -869,8 +869,9 @@ def _search_part(
 
 
 #: the words of a part worker's row of the control array (:class:`BoundedParallelSearch`):
-#: the job number asked, its number of queries, the job number done, stop, sleeping
-_JOB, _QUERIES, _DONE, _STOP, _SLEEPING = 0, 1, 2, 3, 4
+#: the job number asked, its number of queries, the job number done, stop, sleeping, and the
+#: job number claimed (by the worker or, where it has not started, the caller)
+_JOB, _QUERIES, _DONE, _STOP, _SLEEPING, _CLAIMED = 0, 1, 2, 3, 4, 5
 #: words per worker's row (a cache line of its own: no false sharing between workers)
 _CONTROL_WORDS = 8
 
@@ -887,10 +888,12 @@ def _part_worker(
     the bank rows ``lo:hi`` (:func:`_search_part`) for ``m = control[_QUERIES]`` queries, whose
     arrays are the first values of the flat buffers (``proj32`` holds ``m x width`` values,
     ``band`` ``m x 3``, ``terms`` ``7 x m``, the parts' state ``n_parts x m``, ...), and the
-    state of part ``part``; it reports the job done (word ``_DONE``). After ``spins`` reads
-    without a job it raises its ``_SLEEPING`` word, looks for a job once more (the caller
-    raises the job number, then reads that word: one of the two sees the other) and returns
-    False, to sleep until woken; it returns True when asked to stop.
+    state of part ``part``. It claims the job (word ``_CLAIMED``, unless the caller, done with
+    its own part first, has claimed it to search the part itself: :func:`_claim_parts`),
+    searches and reports it done (word ``_DONE``). After ``spins`` reads without a job it
+    raises its ``_SLEEPING`` word, looks for a job once more (the caller raises the job
+    number, then reads that word: one of the two sees the other) and returns False, to sleep
+    until woken; it returns True when asked to stop.
     """
     d = bank.shape[1]
     width_k = proj32_t.shape[0]
@@ -900,7 +903,10 @@ def _part_worker(
     idle = 0
     while True:
         job = atomic_load(control, _JOB)
-        if job != atomic_load(control, _DONE):
+        if job != atomic_load(control, _CLAIMED):
+            idle = 0
+            if not atomic_compare_exchange(control, _CLAIMED, job - 1, job):
+                continue  # the caller's
             m = atomic_load(control, _QUERIES)
             state = n_parts * m
             _search_part(
@@ -915,7 +921,6 @@ def _part_worker(
                 kept[:state].reshape((n_parts, m))[part], overflow[:state].reshape((n_parts, m))[part],
             )  # fmt: skip
             atomic_store(control, _DONE, job)
-            idle = 0
         elif atomic_load(control, _STOP) != 0:
             return True
         else:
@@ -923,7 +928,7 @@ def _part_worker(
             if idle >= spins:
                 atomic_store(control, _SLEEPING, 1)
                 if (
-                    atomic_load(control, _JOB) == atomic_load(control, _DONE)
+                    atomic_load(control, _JOB) == atomic_load(control, _CLAIMED)
                     and atomic_load(control, _STOP) == 0
                 ):
                     return False
@@ -940,6 +945,18 @@ def _post_job(control, job, m, sleeping):
         atomic_store(row, _QUERIES, m)
         atomic_store(row, _JOB, job)
         sleeping[w] = atomic_load(row, _SLEEPING) != 0
+
+
+@jit(nogil=True)
+def _claim_parts(control, job, claimed):
+    """Claim job ``job`` of every worker that has not claimed it yet, reported done at once
+    (the caller searches these parts itself, or drops them after an error);
+    ``claimed[w]``: whether worker ``w``'s part was claimed here."""
+    for w in range(control.shape[0]):
+        row = control[w]
+        claimed[w] = atomic_compare_exchange(row, _CLAIMED, job - 1, job)
+        if claimed[w]:
+            atomic_store(row, _DONE, job)
 
 
 @jit(nogil=True)
@@ -1223,6 +1240,8 @@ class BoundedNearestIndex:
         counts = np.empty((n, bands.shape[1]), dtype=np.int64)
         gamma_x = 1.01 * _gamma(d + 3, _U64)
         gamma_e = 1.01 * _gamma(self.basis.shape[1] + 3, _U64)
+        if workers is not None and workers.index is not self:
+            raise ValueError("workers of another index (BoundedNearestIndex.parallel_search)")
         if workers is not None and workers.serves(min(n, self.block), seeds.shape[1]):
             n_parts = workers.n_parts
         else:
@@ -1419,12 +1438,16 @@ class BoundedParallelSearch:
     job is posted, searches its rows (the float32 products through NumPy's ``cblas_sgemm``,
     :func:`_search_part`) in buffers shared with the caller (:class:`_SearchBuffers`), and
     posts the job done; after :data:`SPIN_READS` reads without a job (about a millisecond)
-    it sleeps until the next one. The answers are the same rows as without the workers (the
-    parts are the same, and every part's answer is proven; ``tests/test_ops_bounded_search.py``).
+    it sleeps until the next one. A part whose worker has not claimed it when the caller is
+    done with part 0 is searched by the caller (:meth:`run`): where other processes keep the
+    cores busy, a worker the system does not run costs no wait. The answers are the same rows
+    as without the workers (the parts are the same, and every part's answer is proven;
+    ``tests/test_ops_bounded_search.py``).
 
     A context manager: the threads start on entry and are stopped and joined on exit (also on
-    an error, after the job in progress). Blocks of another number of parts (too few pairs:
-    :data:`PARALLEL_PAIRS`), of more queries than ``queries`` or of another number of seeds
+    an error, after the job in progress); it may be entered again after an exit, and one
+    thread at a time queries through it. Blocks of another number of parts (too few pairs:
+    :data:`WORKER_PAIRS`), of more queries than ``queries`` or of another number of seeds
     are searched as without workers. Where NumPy's ``cblas_sgemm`` is not found
     (:func:`texsyn.ops.linalg.cblas_sgemm`) or one part would do, there are no workers.
 
@@ -1457,6 +1480,7 @@ class BoundedParallelSearch:
         )  # fmt: skip
         self._control = np.zeros((self.n_parts - 1, _CONTROL_WORDS), dtype=np.int64)
         self._sleeping = np.zeros(self.n_parts - 1, dtype=np.bool_)
+        self._claimed = np.zeros(self.n_parts - 1, dtype=np.bool_)
 
     def serves(self, m: int, n_seeds: int) -> bool:
         """Whether the workers search blocks of ``m`` queries with ``n_seeds`` seeds (in
@@ -1472,6 +1496,10 @@ class BoundedParallelSearch:
 
     def __enter__(self) -> BoundedParallelSearch:
         if self.active:
+            if self._threads:
+                raise RuntimeError("the search workers are running already")
+            self._control[...] = 0  # (entered again after an exit: its stop words were set)
+            self._wake, self._errors, self._job = [], [], 0
             for w in range(self.n_parts - 1):
                 self._wake.append(threading.Event())
                 thread = threading.Thread(target=self._serve, args=(w,), name="texsyn-part", daemon=True)
@@ -1511,17 +1539,29 @@ class BoundedParallelSearch:
 
     def run(self, m: int, search_part: Callable[[int], None]) -> None:
         """Post a job of ``m`` queries to the workers, search part 0 with ``search_part(0)`` on
-        this thread, and wait for the workers' parts."""
+        this thread, then the parts no worker has started yet (a worker that the system has
+        not run since the job was posted: another process on its core), and wait for the
+        workers' parts. On an error the parts not started are dropped and the ones started
+        awaited: no worker writes into the buffers after this returns or raises."""
         self._job += 1
-        _post_job(self._control, self._job, m, self._sleeping)
+        job = self._job
+        _post_job(self._control, job, m, self._sleeping)
         for w in np.flatnonzero(self._sleeping):
             self._wake[w].set()
-        search_part(0)
-        while not _await_job(self._control, self._job, SPIN_READS * 16):
-            if self._errors:
-                raise RuntimeError("a search worker failed") from self._errors[0]
-            if not all(thread.is_alive() for thread in self._threads):  # pragma: no cover
-                raise RuntimeError("a search worker stopped")
+        try:
+            search_part(0)
+            _claim_parts(self._control, job, self._claimed)
+            for w in np.flatnonzero(self._claimed):
+                search_part(int(w) + 1)
+        finally:
+            _claim_parts(self._control, job, self._claimed)  # (after an error: none searches them)
+            while not _await_job(self._control, job, SPIN_READS * 16):
+                if self._errors:
+                    raise RuntimeError("a search worker failed") from self._errors[0]
+                if not all(thread.is_alive() for thread in self._threads):  # pragma: no cover
+                    raise RuntimeError("a search worker stopped")
+        if self._errors:  # (its parts were searched here)
+            raise RuntimeError("a search worker failed") from self._errors[0]
 
 
 def _bank_parts(queries: float, rows: float, pairs: int = PARALLEL_PAIRS) -> int:
