@@ -79,7 +79,10 @@ def test_wei_levoy_wavefronts_with_workers_give_the_plain_search_bytes(three_par
     assert not _part_threads()
 
 
-def test_without_numpys_sgemm_there_are_no_workers_and_the_same_answers(three_parts, monkeypatch):
+@pytest.mark.parametrize("missing", ["cblas_sgemm", "os_yield"])
+def test_without_numpys_sgemm_or_sched_yield_there_are_no_workers_and_the_same_answers(
+    three_parts, monkeypatch, missing
+):
     rng = np.random.default_rng(1)
     bank = _bank(rng, 3072, 30)
     norms = np.sum(bank * bank, axis=1)
@@ -88,7 +91,7 @@ def test_without_numpys_sgemm_there_are_no_workers_and_the_same_answers(three_pa
     with fixed_order():
         with index.parallel_search(40, 2) as workers:
             fast = nearest_rows_bounded(queries, bank, norms, index, seeds, workers=workers)
-        monkeypatch.setattr(search, "cblas_sgemm", lambda: None)  # the products by NumPy, per chunk
+        monkeypatch.setattr(search, missing, lambda: None)  # (cblas_sgemm: NumPy's products, per chunk)
         with index.parallel_search(40, 2) as workers:
             assert not workers.active and not _part_threads()
             plain = nearest_rows_bounded(queries, bank, norms, index, seeds, workers=workers)

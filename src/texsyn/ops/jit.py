@@ -59,6 +59,22 @@ class KernelIntrinsic:
         return self._intrinsic
 
 
+@functools.cache
+def os_yield() -> Any:
+    """The C library's ``sched_yield`` as a ctypes function that a compiled kernel can call
+    without the GIL (the thread gives its core to another runnable thread, if any, and goes on
+    at once otherwise); None where the C library has none."""
+    import ctypes
+
+    try:
+        function = ctypes.CDLL(None).sched_yield
+    except (OSError, AttributeError, TypeError):  # no C library with sched_yield (Windows)
+        return None
+    function.argtypes = []
+    function.restype = ctypes.c_int
+    return ctypes.CFUNCTYPE(ctypes.c_int)(("sched_yield", ctypes.CDLL(None)))
+
+
 def _python_atomic_load(array, index):
     """``array[index]`` (a plain read: Python runs one kernel thread at a time under the GIL)."""
     return array[index]

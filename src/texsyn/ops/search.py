@@ -28,7 +28,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .jit import atomic_compare_exchange, atomic_load, atomic_store, jit, prange
+from .jit import atomic_compare_exchange, atomic_load, atomic_store, jit, os_yield, prange
 from .linalg import (
     BLOCK_COLUMNS,
     BLOCK_ROWS,
@@ -872,13 +872,16 @@ def _search_part(
 #: the job number asked, its number of queries, the job number done, stop, sleeping, and the
 #: job number claimed (by the worker or, where it has not started, the caller)
 _JOB, _QUERIES, _DONE, _STOP, _SLEEPING, _CLAIMED = 0, 1, 2, 3, 4, 5
+#: reads of an idle part worker between two offers of its core to another thread
+#: (``sched_yield``: on a busy machine the spinning takes less time from the caller)
+_READS_PER_YIELD = 64
 #: words per worker's row (a cache line of its own: no false sharing between workers)
 _CONTROL_WORDS = 8
 
 
 @jit(nogil=True)
 def _part_worker(
-    control, spins, sgemm, part, n_parts, n_seeds, lo, hi, chunk, proj32, proj32_t, gram, queries,
+    control, spins, pause, sgemm, part, n_parts, n_seeds, lo, hi, chunk, proj32, proj32_t, gram, queries,
     bank, seeds, terms, q_ext, b_res, b_res2, b_ext, b_errors, sigma, gamma_x, gamma_e, band, best_j,
     best_x, upper, keep_j, keep_x, kept, overflow,
 ):  # fmt: skip
@@ -925,6 +928,8 @@ def _part_worker(
             return True
         else:
             idle += 1
+            if idle % _READS_PER_YIELD == 0:  # another thread may need this core
+                pause()
             if idle >= spins:
                 atomic_store(control, _SLEEPING, 1)
                 if (
@@ -1421,9 +1426,13 @@ class _SearchBuffers:
 #: thread (:data:`PARALLEL_PAIRS`); level 1 of Wei and Levoy's default 128x128 exemplar (26
 #: queries against 4096 rows) is cut in two
 WORKER_PAIRS = 1 << 15
-#: reads of its control word a part worker makes without a job before it sleeps (about a
-#: millisecond on the benchmark machine: longer than the work between two wavefronts)
-SPIN_READS = 1 << 21
+#: reads of its control word a part worker makes without a job before it sleeps, offering
+#: its core to other threads every :data:`_READS_PER_YIELD` reads (0.85 ms on the benchmark
+#: machine: longer than the caller's work between two wavefronts, 0.1-0.2 ms). Measured
+#: there (``docs/methods/wei_levoy.md``, "Part workers"): without the offers, workers
+#: spinning as long took 10 % more time from a command beside a busy process than the
+#: thread pool did; with them, none
+SPIN_READS = 1 << 18
 
 
 class BoundedParallelSearch:
@@ -1437,8 +1446,8 @@ class BoundedParallelSearch:
     compiled loop without the GIL (:func:`_part_worker`): it reads its control word until a
     job is posted, searches its rows (the float32 products through NumPy's ``cblas_sgemm``,
     :func:`_search_part`) in buffers shared with the caller (:class:`_SearchBuffers`), and
-    posts the job done; after :data:`SPIN_READS` reads without a job (about a millisecond)
-    it sleeps until the next one. A part whose worker has not claimed it when the caller is
+    posts the job done; after :data:`SPIN_READS` reads without a job (about a millisecond,
+    offering its core to other threads every few reads: ``sched_yield``) it sleeps until the next one. A part whose worker has not claimed it when the caller is
     done with part 0 is searched by the caller (:meth:`run`): where other processes keep the
     cores busy, a worker the system does not run costs no wait. The answers are the same rows
     as without the workers (the parts are the same, and every part's answer is proven;
@@ -1466,7 +1475,8 @@ class BoundedParallelSearch:
         self.n_seeds = int(seeds)
         self.n_parts = _bank_parts(self.queries, len(index), WORKER_PAIRS)
         self.sgemm = cblas_sgemm()
-        self.active = self.n_parts > 1 and self.sgemm is not None
+        self.pause = os_yield()
+        self.active = self.n_parts > 1 and self.sgemm is not None and self.pause is not None
         self._threads: list[threading.Thread] = []
         self._wake: list[threading.Event] = []
         self._errors: list[BaseException] = []
@@ -1526,7 +1536,7 @@ class BoundedParallelSearch:
         control = self._control[w]
         try:
             while not _part_worker(
-                control, SPIN_READS, self.sgemm, part, self.n_parts, self.n_seeds, edges[part],
+                control, SPIN_READS, self.pause, self.sgemm, part, self.n_parts, self.n_seeds, edges[part],
                 edges[part + 1], index.chunk, b.proj32, index._proj32_t, b.gram[part], b.queries,
                 index.bank, b.seeds, b.terms, b.q_ext, index._b_res, index._b_res2, index._b_ext,
                 index._b_errors, index._sigma, gamma_x, gamma_e, b.band, b.best_j, b.best_x, b.upper,
