@@ -235,3 +235,24 @@ def test_the_workers_may_be_entered_again(three_parts):
                 assert np.array_equal(index.query(queries, bands, seeds, workers=workers)[0], want)
                 assert workers._job == 1 and len(_part_threads()) == 2
             assert not _part_threads()
+
+
+def test_a_thread_that_cannot_start_stops_those_started(three_parts, monkeypatch):
+    rng = np.random.default_rng(4)
+    bank = _bank(rng, 4096, 20)
+    index = BoundedNearestIndex(bank, dims=8, extra=8)
+    workers = index.parallel_search(30, 2)
+    assert workers.n_parts == 3
+    start = threading.Thread.start
+    started = []
+
+    def start_once(thread):
+        if thread.name == "texsyn-part" and started:
+            raise RuntimeError("can't start new thread")
+        started.append(thread)
+        start(thread)
+
+    monkeypatch.setattr(threading.Thread, "start", start_once)
+    with pytest.raises(RuntimeError, match="can't start new thread"):
+        workers.__enter__()
+    assert len(started) == 1 and not started[0].is_alive() and not _part_threads()

@@ -953,6 +953,13 @@ def _post_job(control, job, m, sleeping):
 
 
 @jit(nogil=True)
+def _post_stop(control):
+    """Ask every worker (a row of ``control``) to stop once its job in progress is done."""
+    for w in range(control.shape[0]):
+        atomic_store(control[w], _STOP, 1)
+
+
+@jit(nogil=True)
 def _claim_parts(control, job, claimed):
     """Claim job ``job`` of every worker that has not claimed it yet, reported done at once
     (the caller searches these parts itself, or drops them after an error);
@@ -1510,16 +1517,21 @@ class BoundedParallelSearch:
                 raise RuntimeError("the search workers are running already")
             self._control[...] = 0  # (entered again after an exit: its stop words were set)
             self._wake, self._errors, self._job = [], [], 0
-            for w in range(self.n_parts - 1):
-                self._wake.append(threading.Event())
-                thread = threading.Thread(target=self._serve, args=(w,), name="texsyn-part", daemon=True)
-                thread.start()
-                self._threads.append(thread)
+            try:
+                for w in range(self.n_parts - 1):
+                    self._wake.append(threading.Event())
+                    thread = threading.Thread(target=self._serve, args=(w,), name="texsyn-part", daemon=True)
+                    thread.start()
+                    self._threads.append(thread)
+            except BaseException:  # (no thread for the next one: stop those started)
+                self.__exit__(None, None, None)
+                raise
         return self
 
     def __exit__(self, *exc_info) -> None:
+        if self._threads:
+            _post_stop(self._control)
         for w in range(len(self._threads)):
-            self._control[w, _STOP] = 1
             self._wake[w].set()
         for thread in self._threads:
             thread.join()
