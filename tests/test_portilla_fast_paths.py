@@ -16,6 +16,7 @@ against its previous form or against the full transforms.
 """
 
 import functools
+import os
 
 import numpy as np
 import pytest
@@ -384,6 +385,7 @@ def test_the_iteration_gives_the_plain_loops_bytes(colour, shape, cpus, monkeypa
     # the larger FFTs use ``cpus`` threads
     monkeypatch.setattr(complex_steerable, "worker_count", lambda: cpus)
     monkeypatch.setattr(complex_steerable, "_THREADED_FFT", 1 << 12)
+    monkeypatch.setattr(complex_steerable, "_THREADED_FFT_REALTIME", 1 << 12)
     model = _fitted(colour)
     target = model.statistics_
     pyramid = ComplexSteerablePyramid(shape, target.n_scales, target.n_orientations, single=True)
@@ -584,3 +586,19 @@ def test_the_half_spectra_give_the_full_spectra_images(shape):
         full = pyramid.reconstruct_spectrum(low, residual, gain)
         half = pyramid.reconstruct_spectrum_half(low, residual, gain)
         assert np.abs(full - half).max() < tol
+
+
+@pytest.mark.parametrize("realtime", [False, True])
+def test_fft_threads_start_at_the_threshold_of_the_scheduling_policy(realtime, monkeypatch):
+    # under the default policy a woken pocketfft thread costs more than it saves on a
+    # 256x256 level; under a real-time one (``chrt``) it starts at once
+    monkeypatch.setattr(complex_steerable, "worker_count", lambda: 2)
+    monkeypatch.setattr(complex_steerable, "_realtime_thread", lambda: realtime)
+    level = 12 * 256 * 256  # a 256x256 level's twelve colour bands
+    assert complex_steerable.fft_workers(level) == (2 if realtime else 1)
+    assert complex_steerable.fft_workers(12 * 512 * 512) == 2
+    assert complex_steerable.fft_workers(1 << 16) == 1
+
+
+def test_the_calling_threads_policy_is_read():
+    assert complex_steerable._realtime_thread() == (os.sched_getscheduler(0) in (os.SCHED_FIFO, os.SCHED_RR))

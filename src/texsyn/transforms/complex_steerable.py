@@ -25,6 +25,7 @@ the full forms they must match (``tests/test_portilla_fast_paths.py``).
 from __future__ import annotations
 
 import functools
+import os
 from collections.abc import Callable
 
 import numpy as np
@@ -79,8 +80,11 @@ def _inverse_norm(n: int, dtype: np.dtype) -> np.ndarray:
 
 #: bands of this many pixels or more are processed one at a time
 _BAND_BY_BAND = 1 << 14
-#: FFTs of this many values or more use every CPU of the process
-_THREADED_FFT = 1 << 17
+#: FFTs of this many values or more use every CPU of the process (a 512x512 level's
+#: twelve colour bands; a 256x256 level's are transformed on one thread) ...
+_THREADED_FFT = 1 << 21
+#: ... or, in a thread with a real-time scheduling policy, this many (:func:`fft_workers`)
+_THREADED_FFT_REALTIME = 1 << 17
 #: frequencies per block of rows in which :class:`ComplexSteerablePyramid` computes its
 #: filters (the blocks' temporaries stay small and in the cache; they share texsyn's threads)
 _FILTER_BLOCK = 1 << 13
@@ -88,14 +92,29 @@ _FILTER_BLOCK = 1 << 13
 
 def fft_workers(size: int) -> int:
     """Threads for an FFT of ``size`` values: every CPU of the process from :data:`_THREADED_FFT`
-    values, else one.
+    values (:data:`_THREADED_FFT_REALTIME` under a real-time scheduling policy), else one.
 
     pocketfft transforms each line on one thread, the same way whichever, so the bytes do not
-    depend on the number of threads (``docs/determinism.md``). Measured on the 2-core
-    benchmark machine, two threads take 20-35 % off the transforms of a 256x256 pyramid level
-    (12 bands) but make transforms of a few 10^4 values slower.
+    depend on the number of threads (``docs/determinism.md``). Its second thread sleeps
+    between two transforms of the synthesis loop (NumPy's work on the bands runs between
+    them) and has to be woken for each. Measured on the 2-core benchmark machine, 20
+    iterations of a 256x256 Portilla-Simoncelli synthesis: under the default policy the loop
+    ran 6-8 % faster with a 256x256 level's transforms on one thread (grey 0.48 -> 0.45 s,
+    colour 1.46 -> 1.35 s; 512x512 and 1024x1024 also faster with 2^21 than with 2^17 or
+    2^23), but in a process run by ``chrt -f 50`` (a real-time policy, whose woken threads
+    start at once on the idle core) two threads took 8 % off the same transforms
+    (``docs/methods/portilla_simoncelli.md``, "Performance").
     """
-    return worker_count() if size >= _THREADED_FFT else 1
+    threshold = _THREADED_FFT_REALTIME if _realtime_thread() else _THREADED_FFT
+    return worker_count() if size >= threshold else 1
+
+
+def _realtime_thread() -> bool:
+    """Whether the calling thread runs under a real-time scheduling policy (FIFO or round robin)."""
+    try:
+        return os.sched_getscheduler(0) in (os.SCHED_FIFO, os.SCHED_RR)
+    except (AttributeError, OSError):  # pragma: no cover - not Linux
+        return False
 
 
 def _row_blocks(size: tuple[int, int]) -> list[slice]:
