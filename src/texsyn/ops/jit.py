@@ -25,7 +25,16 @@ import types
 from collections.abc import Callable
 from typing import Any
 
-__all__ = ["LazyKernel", "atomic_compare_exchange", "atomic_load", "atomic_store", "jit", "prange"]
+__all__ = [
+    "KernelIntrinsic",
+    "LazyKernel",
+    "atomic_compare_exchange",
+    "atomic_load",
+    "atomic_store",
+    "jit",
+    "os_yield",
+    "prange",
+]
 
 #: the parallel loop of a kernel: ``range`` in Python, numba's ``prange`` once compiled
 prange = range
@@ -67,12 +76,11 @@ def os_yield() -> Any:
     import ctypes
 
     try:
-        function = ctypes.CDLL(None).sched_yield
-    except (OSError, AttributeError, TypeError):  # no C library with sched_yield (Windows)
+        library = ctypes.CDLL(None)
+        library.sched_yield  # noqa: B018  (AttributeError where the C library has none)
+    except (OSError, AttributeError, TypeError):  # (Windows)
         return None
-    function.argtypes = []
-    function.restype = ctypes.c_int
-    return ctypes.CFUNCTYPE(ctypes.c_int)(("sched_yield", ctypes.CDLL(None)))
+    return ctypes.CFUNCTYPE(ctypes.c_int)(("sched_yield", library))
 
 
 def _python_atomic_load(array, index):
