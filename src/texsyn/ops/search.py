@@ -1161,10 +1161,16 @@ class BoundedNearestIndex:
         isolated = np.ones(len(self), dtype=np.bool_)
         order = np.argsort(keys[:, 0], kind="stable")
         limit = len(self) if limit is None else int(limit)
-        gamma_x = 1.01 * _gamma(d + 3, _U64)
+        gamma_x = self._distance_gammas()[0]
         if not _isolation_sweep(order, keys, slack, self.bank, radius2, gamma_x, limit, isolated):
             return None
         return isolated
+
+    def _distance_gammas(self) -> tuple[float, float]:
+        """Relative error bounds (with a 1 % margin) of a computed exact squared distance over
+        all ``D`` coordinates (``gamma_{D+3}``) and over the index's coordinates
+        (``gamma_{p+3}``): what every search of this index, on any thread, allows for."""
+        return 1.01 * _gamma(self.bank.shape[1] + 3, _U64), 1.01 * _gamma(self.basis.shape[1] + 3, _U64)
 
     def _side_terms(self, centred: np.ndarray, full: np.ndarray) -> tuple[np.ndarray, ...]:
         """Projection error bound, residual norms and their error bounds of centred rows.
@@ -1250,8 +1256,7 @@ class BoundedNearestIndex:
         index = np.empty(n, dtype=np.int64)
         distance = np.empty(n)
         counts = np.empty((n, bands.shape[1]), dtype=np.int64)
-        gamma_x = 1.01 * _gamma(d + 3, _U64)
-        gamma_e = 1.01 * _gamma(self.basis.shape[1] + 3, _U64)
+        gamma_x, gamma_e = self._distance_gammas()
         if workers is not None and workers.index is not self:
             raise ValueError("workers of another index (BoundedNearestIndex.parallel_search)")
         if workers is not None and workers.serves(min(n, self.block), seeds.shape[1]):
@@ -1541,8 +1546,7 @@ class BoundedParallelSearch:
         """A worker thread: the compiled loop, and sleeps between its runs."""
         index = self.index
         b = self.buffers
-        gamma_x = 1.01 * _gamma(index.bank.shape[1] + 3, _U64)
-        gamma_e = 1.01 * _gamma(index.basis.shape[1] + 3, _U64)
+        gamma_x, gamma_e = index._distance_gammas()
         part = w + 1
         edges = _part_edges(len(index), self.n_parts)
         control = self._control[w]
