@@ -39,9 +39,13 @@ def test_transforms_give_scipy_fft_bytes(dtype, shape, use_scipy, monkeypatch):
         if not np.iscomplexobj(x):
             half = scipy.fft.rfft2(x, workers=workers)
             assert _same(fft.rfft2(x, workers=workers), half)
-            assert _same(
-                fft.irfft2(half, s=shape[-2:], workers=workers), scipy.fft.irfft2(half, s=shape[-2:])
-            )
+            expected = scipy.fft.irfft2(half, s=shape[-2:])
+            assert _same(fft.irfft2(half, s=shape[-2:], workers=workers), expected)
+            # in two passes, the first in place on the half spectra: the same bytes
+            overwritten = half.copy()
+            assert _same(fft.irfft2(overwritten, s=shape[-2:], workers=workers, overwrite_x=True), expected)
+            if not use_scipy:
+                assert not _same(overwritten, half)  # the input was the first pass's workspace
     # in place where asked, as scipy.fft does for a complex array
     y = x.astype(np.result_type(dtype, np.complex64))
     expected = scipy.fft.ifft2(y)

@@ -105,7 +105,7 @@ def filter_autocorrelation_spectrum(spec: np.ndarray, target: np.ndarray, shape:
             ]
         ).reshape(b.shape)
     spec *= _symmetric_filter_gain(coef, plan)
-    return pocketfft.irfft2(spec, s=(h, w), workers=fft_workers(2 * spec.size))
+    return pocketfft.irfft2(spec, s=(h, w), workers=fft_workers(2 * spec.size), overwrite_x=True)
 
 
 class _WindowPlan(NamedTuple):
@@ -317,7 +317,8 @@ def impose_lowpass_statistics(
         out = filter_autocorrelation_spectrum(spectrum, window, (h, w)).astype(np.float64)
     else:
         if spectrum is not None:
-            images = pocketfft.irfft2(spectrum, s=(h, w), workers=fft_workers(2 * spectrum.size))
+            workers = fft_workers(2 * spectrum.size)
+            images = pocketfft.irfft2(spectrum, s=(h, w), workers=workers, overwrite_x=True)
         assert images is not None
         if active.all():  # no copies in and out of the active channels
             out = np.asarray(filter_autocorrelation(images, window), dtype=np.float64)

@@ -31,6 +31,7 @@ from collections.abc import Callable
 import numpy as np
 
 from ..ops import fft as pocketfft
+from ..ops.fft import inverse_norm as inverse_norm  # re-exported (its home before issue 20's eighth round)
 from ..ops.linalg import parallel_map, worker_count
 from .steerable import crop_indices, oriented_windows, pyramid_sizes, radial_lowpass
 
@@ -62,20 +63,6 @@ def _runs(indices: np.ndarray) -> list[tuple[slice, slice]]:
         (slice(int(indices[a]), int(indices[b - 1]) + 1), slice(int(a), int(b)))
         for a, b in zip(starts, stops)
     ]
-
-
-def inverse_norm(n: int, dtype) -> np.ndarray:
-    """pocketfft's ``1 / n`` normalisation factor, a 0-d array of ``dtype``: computed in long
-    double, then rounded once (``norm_fct`` of scipy's ``pypocketfft``); read-only, computed
-    once per size and type (the synthesis asks for it 25 times an iteration)."""
-    return _inverse_norm(int(n), np.dtype(dtype))
-
-
-@functools.cache
-def _inverse_norm(n: int, dtype: np.dtype) -> np.ndarray:
-    factor = np.asarray(np.longdouble(1) / np.longdouble(n)).astype(dtype)
-    factor.flags.writeable = False
-    return factor
 
 
 #: bands of this many pixels or more are processed one at a time
@@ -269,9 +256,11 @@ class ComplexSteerablePyramid:
         x = np.asarray(x)
         return pocketfft.rfft2(x.astype(self.real_dtype, copy=False), workers=fft_workers(x.size))
 
-    def irfft(self, half: np.ndarray, level: int = 0) -> np.ndarray:
-        """The real image of the size of ``level`` from its half spectrum (``irfft2``)."""
-        return pocketfft.irfft2(half, s=self.sizes[level], workers=fft_workers(2 * half.size))
+    def irfft(self, half: np.ndarray, level: int = 0, *, overwrite: bool = False) -> np.ndarray:
+        """The real image of the size of ``level`` from its half spectrum (``irfft2``;
+        ``overwrite``: ``half`` may be overwritten, which saves memory traffic, same bytes)."""
+        workers = fft_workers(2 * half.size)
+        return pocketfft.irfft2(half, s=self.sizes[level], workers=workers, overwrite_x=overwrite)
 
     def ifft(self, x: np.ndarray) -> np.ndarray:
         """Inverse 2-D FFT over the last two axes (complex result; threads as :meth:`fft`)."""
@@ -500,7 +489,7 @@ class ComplexSteerablePyramid:
         gain = np.asarray(gain, dtype=self.real_dtype)[..., None, None]
         spec = self.rfft(low0)
         spec += highpass_spectrum[..., :half] * (gain * self.hi0_half)
-        return self.irfft(spec)
+        return self.irfft(spec, overwrite=True)
 
     def analytic(self, real_bands: np.ndarray, level: int, *, real_spectra=None):
         """Re-create the complex bands ``(..., K, h, w)`` from their real parts; returns
