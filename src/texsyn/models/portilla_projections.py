@@ -130,8 +130,8 @@ def _window_plan(lag: int, h: int, w: int) -> _WindowPlan:
     half = _half_offsets(lag)
     diff = half[:, None, :] - half[None, :, :]
     summ = half[:, None, :] + half[None, :, :]
-    rows = np.unique(np.concatenate([diff[..., 0].ravel(), summ[..., 0].ravel()]) % h)
-    cols = np.unique(np.concatenate([diff[..., 1].ravel(), summ[..., 1].ravel()]) % w)
+    rows = _sorted_distinct(np.concatenate([diff[..., 0].ravel(), summ[..., 0].ravel()]) % h)
+    cols = _sorted_distinct(np.concatenate([diff[..., 1].ravel(), summ[..., 1].ravel()]) % w)
     u, v = np.arange(h), np.arange(w // 2 + 1)
     angle_rows = 2.0 * np.pi * ((rows[:, None] * u[None, :]) % h) / h  # (R, h)
     angle_cols = 2.0 * np.pi * ((v[:, None] * cols[None, :]) % w) / w  # (V, Q)
@@ -150,6 +150,13 @@ def _window_plan(lag: int, h: int, w: int) -> _WindowPlan:
         lag_cols=lag_cols.astype(np.float32),
         **_filter_tables(lag, h, w),
     )
+
+
+def _sorted_distinct(values: np.ndarray) -> np.ndarray:
+    """``numpy.unique(values)`` of integers, without it: its first call imports ``numpy.ma``
+    (6 ms of a command's start-up)."""
+    values = np.sort(values)
+    return values[np.concatenate([[True], values[1:] != values[:-1]])]
 
 
 def _filter_tables(lag: int, h: int, w: int) -> dict:

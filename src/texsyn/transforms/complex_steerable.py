@@ -92,6 +92,8 @@ def fft_workers(size: int) -> int:
     start at once on the idle core) two threads took 8 % off the same transforms
     (``docs/methods/portilla_simoncelli.md``, "Performance").
     """
+    if size < _THREADED_FFT_REALTIME:  # one thread under either policy: no system call
+        return 1
     threshold = _THREADED_FFT_REALTIME if _realtime_thread() else _THREADED_FFT
     return worker_count() if size >= threshold else 1
 
