@@ -9,6 +9,8 @@ projections are in :mod:`texsyn.models.portilla_projections`, which re-exports t
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 __all__ = ["FLAT_VARIANCE", "impose_kurtosis", "impose_skewness", "is_flat"]
@@ -119,9 +121,93 @@ def _poly_roots(c) -> np.ndarray:
         companion = np.zeros((n, n), dtype=c.dtype)
         companion.reshape(-1)[n :: n + 1] = 1
         companion[:, -1] -= c[:-1] / c[-1]
-        roots = np.linalg.eigvals(companion)
+        roots = _eigenvalues(companion)
         roots.sort()
     return _ZERO + _ONE * roots
+
+
+try:  # the compiled routine behind numpy.linalg.eigvals (its wrapper costs more than the call)
+    from numpy.linalg import _umath_linalg as _linalg_routines
+except ImportError:  # pragma: no cover - another NumPy layout: the public function
+    _linalg_routines = None
+
+
+def _eigenvalues(matrix: np.ndarray) -> np.ndarray:
+    """``numpy.linalg.eigvals(matrix)`` of a real square matrix: the same LAPACK call and the
+    same result (complex, or real when every imaginary part is zero), without the wrapper's
+    checks where they pass; a matrix they refuse, or LAPACK's failure to converge, goes to
+    ``eigvals`` itself, which raises as it does."""
+    if _linalg_routines is None or not math.isfinite(matrix.sum()):  # (a finite sum: all finite)
+        return np.linalg.eigvals(matrix)
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore", under="ignore"):
+        values = _linalg_routines.eigvals(matrix, signature="d->D")
+    if not math.isfinite(values.real.sum()):  # no convergence (its values are NaN): eigvals raises
+        return np.linalg.eigvals(matrix)
+    return values.real if not values.imag.any() else values
+
+
+def _roots(c: list) -> tuple[list, list]:
+    """The real and imaginary parts of :func:`_poly_roots` of the coefficients ``c``, as lists."""
+    roots = _poly_roots(c)
+    return roots.real.tolist(), (roots.imag.tolist() if roots.dtype.kind == "c" else [0.0] * roots.size)
+
+
+# The step solver below does the arithmetic of ``numpy.polynomial.Polynomial`` on lists of
+# floats: sums, differences, products by a number, derivatives and Horner's scheme are the
+# same operations on the same numbers one at a time (a product by a number as ``np.convolve``
+# makes it, ``0 + a b``); products of two polynomials and the roots stay NumPy's
+# (``np.convolve``, the companion matrix's eigenvalues), so the results are the same bits
+# (``tests/test_portilla_fast_paths.py``) for a quarter of the calls into NumPy.
+
+
+def _trimmed(c: list) -> list:
+    """``c`` without its trailing zero coefficients (at least one kept), as :func:`_trim`."""
+    n = len(c)
+    while n > 1 and c[n - 1] == 0:
+        n -= 1
+    return c[:n] if n < len(c) else c
+
+
+def _times(c1: list, c2: list) -> list:
+    """The product of two polynomials, untrimmed (``np.convolve`` of the trimmed factors)."""
+    return np.convolve(_trimmed(c1), _trimmed(c2)).tolist()
+
+
+def _scaled(factor: float, c: list) -> list:
+    """``Polynomial([factor]) * Polynomial(c)``: each product as ``np.convolve`` makes it."""
+    return _trimmed([0.0 + factor * v for v in _trimmed(c)])
+
+
+def _minus(c1: list, c2: list) -> list:
+    """``Polynomial(c1) - Polynomial(c2)`` (:func:`_poly_sub`)."""
+    c1, c2 = _trimmed(c1), _trimmed(c2)
+    if len(c1) > len(c2):
+        return _trimmed([a - b for a, b in zip(c1, c2)] + c1[len(c2) :])
+    out = [-b for b in c2]
+    for i, a in enumerate(c1):
+        out[i] += a
+    return _trimmed(out)
+
+
+def _derivative(c: list) -> list:
+    """``Polynomial(c).deriv()`` of untrimmed coefficients (:func:`_poly_der`)."""
+    if len(c) <= 1:
+        return [c[0] * 0] if c else []
+    return [j * c[j] for j in range(1, len(c))]
+
+
+def _value(c: list, x: float) -> float:
+    """``Polynomial(c)(x)`` of one number (:func:`_poly_val`)."""
+    x = 0.0 + 1.0 * x
+    value = c[-1] + x * 0
+    for i in range(2, len(c) + 1):
+        value = c[-i] + value * x
+    return value
+
+
+def _sign(x: float) -> float:
+    """``np.sign(x)``."""
+    return float(x > 0) - float(x < 0) if x == x else float(x)
 
 
 def _monotone_interval(num, den, power) -> tuple[float, float]:
@@ -131,15 +217,22 @@ def _monotone_interval(num, den, power) -> tuple[float, float]:
     there is none): the roots of ``num' den - (power/2) num den'``, the numerator of the
     ratio's derivative.
     """
-    num = np.array(num, dtype=np.float64)
-    den = np.array(den, dtype=np.float64)
-    derivative = _poly_sub(
-        _poly_mul(_poly_der(num), den), _poly_mul(_poly_mul([power / 2.0], num), _poly_der(den))
+    num = [float(v) for v in num]
+    den = [float(v) for v in den]
+    derivative = _minus(
+        _trimmed(_times(_derivative(num), den)), _trimmed(_times(_scaled(power / 2.0, num), _derivative(den)))
     )
-    roots = _poly_roots(derivative)
-    real = roots[np.abs(roots.imag) < 1e-6 * np.maximum(1.0, np.abs(roots.real))].real
-    below, above = real[real < 0], real[real > 0]
-    return (below.max() if below.size else -np.inf), (above.min() if above.size else np.inf)
+    real = _real_roots(derivative)
+    below = [r for r in real if r < 0]
+    above = [r for r in real if r > 0]
+    return (np.float64(max(below)) if below else -np.inf), (np.float64(min(above)) if above else np.inf)
+
+
+def _real_roots(c: list) -> list:
+    """The real roots of ``c`` (imaginary part below ``1e-6`` of the real one, or of 1), in
+    :func:`_poly_roots`'s order."""
+    real, imag = _roots(c)
+    return [r for r, i in zip(real, imag) if abs(i) < 1e-6 * max(1.0, abs(r))]
 
 
 def _solve_lambda(coeffs_num, coeffs_den, target, power):
@@ -154,24 +247,27 @@ def _solve_lambda(coeffs_num, coeffs_den, target, power):
     as the reference code saturates an unreachable moment. ``None`` when the target is
     unreachable and the ratio has no extremum.
     """
-    num = np.array(coeffs_num, dtype=np.float64)
-    den = np.array(coeffs_den, dtype=np.float64)
+    num = [float(v) for v in coeffs_num]
+    den = [float(v) for v in coeffs_den]
     if power == 3:  # skewness: num / den^1.5 = t  ->  num^2 - t^2 den^3 = 0, sign(num) = sign(t)
-        poly = _poly_sub(_poly_pow(num, 2), _poly_mul([target**2], _poly_pow(den, 3)))
+        cube = np.convolve(np.convolve(_trimmed(den), _trimmed(den)), _trimmed(den)).tolist()
+        poly = _minus(_times(num, num), _scaled(target**2, cube))
     else:  # kurtosis: num / den^2 = t  ->  num - t den^2 = 0
-        poly = _poly_sub(num, _poly_mul([target], _poly_pow(den, 2)))
-    roots = _poly_roots(poly)
-    real = roots[np.abs(roots.imag) < 1e-6 * np.maximum(1.0, np.abs(roots.real))].real
-    if power == 3:
-        real = real[np.sign(_poly_val(num, real)) == np.sign(target)] if target != 0 else real
+        poly = _minus(num, _scaled(target, _times(den, den)))
+    real = _real_roots(poly)
+    if power == 3 and target != 0:
+        wanted = _sign(target)
+        real = [r for r in real if _sign(_value(num, r)) == wanted]
     low, high = _monotone_interval(num, den, power)
-    real = real[(real >= low) & (real <= high)]
-    if real.size:
-        return real[np.argmin(np.abs(real))]
+    real = [r for r in real if low <= r <= high]
+    if real:
+        return np.float64(min(real, key=abs))
     ends = np.array([end for end in (low, high) if np.isfinite(end)])
     if ends.size == 0:
         return None
-    return ends[np.argmin(np.abs(_poly_val(num, ends) / _poly_val(den, ends) ** (power / 2.0) - target))]
+    num_array, den_array = np.array(num), np.array(den)
+    ratio = _poly_val(num_array, ends) / _poly_val(den_array, ends) ** (power / 2.0)
+    return ends[np.argmin(np.abs(ratio - target))]
 
 
 def _power_means(x: np.ndarray, mean: float, rows: int) -> tuple[np.ndarray, np.ndarray]:
