@@ -23,6 +23,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..ops import fft as pocketfft
+from ..ops.linalg import add_product
 from ..transforms.complex_steerable import fft_workers, for_each_band
 from .portilla import PSStatistics
 from .portilla_moments import FLAT_VARIANCE as FLAT_VARIANCE  # re-exported (round 1's home)
@@ -270,8 +271,9 @@ def adjust_cross_correlation_rows(
     m = _sqrtm(current, inverse=True) @ _sqrtm(desired)
     # (x - y regression) m + y ibyy target_xy^T, with two products of N-column matrices
     out = m.T.astype(rows.dtype) @ rows[:k]
-    out += (ibyy @ target_xy.T - regression @ m).T.astype(rows.dtype) @ rows[k:]
-    return out
+    return add_product(
+        out, np.ascontiguousarray((ibyy @ target_xy.T - regression @ m).T, rows.dtype), rows[k:]
+    )
 
 
 def fit_window(target: np.ndarray, shape: tuple[int, int], lags: int) -> np.ndarray:
@@ -369,12 +371,10 @@ def parent_regression_rows(rows: np.ndarray, k: int, target_xp: np.ndarray) -> n
     current = own - np.einsum("mk,mk->k", cross, regression)
     desired = np.maximum(own - np.einsum("km,mk->k", target_xp, fit), 0.0)
     scale = np.sqrt(desired / np.where(current > 0, current, 1.0))
-    mix = (fit - regression * scale).T.astype(np.float32)
-    fitted = mix @ rows[k:]
+    mix = np.ascontiguousarray((fit - regression * scale).T, np.float32)
     out = rows[:k]
     out *= scale[:, None].astype(np.float32)
-    out += fitted
-    return out
+    return add_product(out, mix, rows[k:])
 
 
 def impose_magnitude_statistics(
