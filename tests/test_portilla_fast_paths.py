@@ -602,3 +602,27 @@ def test_fft_threads_start_at_the_threshold_of_the_scheduling_policy(realtime, m
 
 def test_the_calling_threads_policy_is_read():
     assert complex_steerable._realtime_thread() == (os.sched_getscheduler(0) in (os.SCHED_FIFO, os.SCHED_RR))
+
+
+def _filters(pyramid):
+    arrays = [pyramid.lo0, pyramid.hi0]
+    for name in ("lo", "real_filters", "conj_real_filters", "analytic_filters", "half_planes", "mid"):
+        arrays += list(getattr(pyramid, name))
+    return arrays
+
+
+@pytest.mark.parametrize("shape", [(64, 64), (72, 90), (256, 256), (257, 255)])
+@pytest.mark.parametrize("orientations", [3, 4, 6])
+def test_the_synthesis_pyramids_filters_are_those_of_the_plain_power(shape, orientations, monkeypatch):
+    # the single-precision pyramid raises the cosines' absolute values to the power
+    # (oriented_windows(single=True)); rounded to single precision, the same bytes
+    fast = _filters(ComplexSteerablePyramid(shape, 3, orientations, single=True))
+    plain = functools.partial(oriented_windows, single=False)
+    monkeypatch.setattr(complex_steerable, "oriented_windows", lambda t, h, k, single: plain(t, h, k))
+    reference = _filters(ComplexSteerablePyramid(shape, 3, orientations, single=True))
+    assert all(a.dtype == b.dtype and a.tobytes() == b.tobytes() for a, b in zip(fast, reference))
+    # in double precision the two powers agree to within a unit in the last place
+    theta = np.linspace(-np.pi, np.pi, 4001)
+    exact = oriented_windows(theta, np.ones_like(theta), orientations)
+    quick = oriented_windows(theta, np.ones_like(theta), orientations, single=True)
+    assert np.allclose(quick, exact, rtol=4e-16, atol=0)

@@ -197,7 +197,7 @@ class ComplexSteerablePyramid:
                     self.lo0[rows] = lo0 = radial_lowpass(r / 2.0)
                     self.hi0[rows] = np.sqrt(np.maximum(1.0 - lo0**2, 0.0))
                 lo = radial_lowpass(r)
-                reals = oriented_windows(theta, np.sqrt(np.maximum(1.0 - lo**2, 0.0)), k)
+                reals = oriented_windows(theta, np.sqrt(np.maximum(1.0 - lo**2, 0.0)), k, single=single)
                 # analytic bands: the half plane each orientation points to, doubled
                 c = np.cos(theta[None] - (np.pi * np.arange(k) / k)[:, None, None])
                 halves = np.where(c > 1e-12, 2.0, np.where(c < -1e-12, 0.0, 1.0))

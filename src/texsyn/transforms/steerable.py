@@ -176,16 +176,33 @@ def pyramid_sizes(shape: tuple[int, int], n_scales: int) -> list[tuple[int, int]
     return sizes
 
 
-def oriented_windows(theta: np.ndarray, highpass: np.ndarray, n_orientations: int) -> np.ndarray:
+def oriented_windows(
+    theta: np.ndarray, highpass: np.ndarray, n_orientations: int, *, single: bool = False
+) -> np.ndarray:
     """The ``K`` oriented band filters ``(-i)^(K-1) alpha cos^(K-1)(theta - pi b / K) H(r)``.
 
     ``alpha`` makes ``sum_b |G_b|^2 = H^2`` (Simoncelli and Freeman 1995). Returns ``(K, ...)``.
+
+    ``single``: the filters are to be rounded to single precision. The power is then taken
+    of the cosines' absolute values and the sign put back: NumPy's power of a negative
+    number runs about 20 times slower than of a positive one, and the two agree to the last
+    bit of double precision in about 97 % of the values, to within one unit of it in the
+    others; the single-precision filters are the same bytes (checked for the sizes of
+    ``tests/test_portilla_fast_paths.py``: a double-precision unit changes a rounding to
+    single precision with a probability of about ``2^-29``). A 256x256 synthesis pyramid is
+    built in 14 instead of 26 ms of CPU (issue 20).
     """
     k = int(n_orientations)
     alpha = 2.0 ** (k - 1) * factorial(k - 1) / np.sqrt(k * factorial(2 * (k - 1)))
     angles = np.pi * np.arange(k) / k
     cosines = np.cos(theta[None] - angles.reshape((k,) + (1,) * theta.ndim))
-    return (-1j) ** (k - 1) * alpha * cosines ** (k - 1) * highpass[None]
+    if single:
+        powers = np.power(np.abs(cosines), k - 1)
+        if (k - 1) % 2:
+            np.copysign(powers, cosines, out=powers)
+    else:
+        powers = cosines ** (k - 1)
+    return (-1j) ** (k - 1) * alpha * powers * highpass[None]
 
 
 class SteerablePyramid:
