@@ -70,8 +70,9 @@ _BAND_BY_BAND = 1 << 14
 #: FFTs of this many values or more use every CPU of the process (a 512x512 level's
 #: twelve colour bands; a 256x256 level's are transformed on one thread) ...
 _THREADED_FFT = 1 << 21
-#: ... or, in a thread with a real-time scheduling policy, this many (:func:`fft_workers`)
-_THREADED_FFT_REALTIME = 1 << 17
+#: ... or, in a thread with a real-time scheduling policy, this many (:func:`fft_workers`: a
+#: 256x256 level's twelve colour bands, not its four grey ones)
+_THREADED_FFT_REALTIME = 1 << 19
 #: frequencies per block of rows in which :class:`ComplexSteerablePyramid` computes its
 #: filters (the blocks' temporaries stay small and in the cache; they share texsyn's threads)
 _FILTER_BLOCK = 1 << 13
@@ -89,7 +90,11 @@ def fft_workers(size: int) -> int:
     ran 6-8 % faster with a 256x256 level's transforms on one thread (grey 0.48 -> 0.45 s,
     colour 1.46 -> 1.35 s; 512x512 and 1024x1024 also faster with 2^21 than with 2^17 or
     2^23), but in a process run by ``chrt -f 50`` (a real-time policy, whose woken threads
-    start at once on the idle core) two threads took 8 % off the same transforms
+    start at once on the idle core) two threads took 8 % off the same transforms. Since the
+    loop's single-thread transforms were made faster (issue 20, eighth round: in place,
+    band by band), a real-time thread gains from a second one on a 256x256 level's twelve
+    colour bands only (20 iterations, colour 1.13-1.15 s with 2^17, 1.11-1.12 s with 2^19,
+    1.12-1.14 s with 2^21; grey 0.41, 0.39 and 0.38 s)
     (``docs/methods/portilla_simoncelli.md``, "Performance").
     """
     if size < _THREADED_FFT_REALTIME:  # one thread under either policy: no system call
