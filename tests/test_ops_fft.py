@@ -88,3 +88,15 @@ def test_scipy_fft_imported_after_the_module_is_whole():
         "assert scipy.fft.fft2(x).tobytes() == f.fft2(x).tobytes()\n"
     )
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+@pytest.mark.parametrize("use_scipy", [False, True])
+def test_irfft2_leaves_a_read_only_input_alone_when_it_may_overwrite(use_scipy, monkeypatch):
+    # overwrite_x permits, as in scipy.fft.irfft2; a read-only array is transformed unchanged
+    if use_scipy:
+        monkeypatch.setattr(fft, "_pocketfft", lambda: None)
+    half = scipy.fft.rfft2(np.random.default_rng(2).standard_normal((2, 12, 15)))
+    half.flags.writeable = False
+    kept = half.copy()
+    assert _same(fft.irfft2(half, s=(12, 15), overwrite_x=True), scipy.fft.irfft2(kept, s=(12, 15)))
+    assert _same(half, kept)

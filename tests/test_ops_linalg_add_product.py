@@ -67,3 +67,17 @@ def test_overlapping_or_other_arrays_go_through_numpy(monkeypatch):
     assert calls == []  # neither reached BLAS directly
     linalg.add_product(np.zeros((8, 1 << 14), np.float32), a, square)
     assert calls == [1]
+
+
+@pytest.mark.parametrize("m, k, n", [(1, 3, 1 << 16), (1, 6, 1 << 16), (1 << 16, 3, 1)])
+def test_a_row_or_a_column_has_the_bits_of_numpys_vector_product(m, k, n):
+    # NumPy multiplies a row or a column with sgemv, whose sums are not sgemm's
+    rng = np.random.default_rng(6)
+    a = rng.standard_normal((m, k)).astype(np.float32)
+    b = rng.standard_normal((k, n)).astype(np.float32)
+    out = rng.standard_normal((m, n)).astype(np.float32)
+    with linalg.fixed_order():
+        expected = out.copy()
+        expected += a @ b
+        linalg.add_product(out, a, b)
+    assert out.tobytes() == expected.tobytes()

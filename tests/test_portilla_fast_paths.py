@@ -626,3 +626,42 @@ def test_the_synthesis_pyramids_filters_are_those_of_the_plain_power(shape, orie
     exact = oriented_windows(theta, np.ones_like(theta), orientations)
     quick = oriented_windows(theta, np.ones_like(theta), orientations, single=True)
     assert np.allclose(quick, exact, rtol=4e-16, atol=0)
+
+
+def test_the_single_precision_windows_round_as_the_plain_powers_where_a_unit_matters():
+    # a highpass chosen so that the plain filters' values sit on single-precision rounding
+    # midpoints, where a unit of double precision in the power changes the rounding
+    k = 4
+    theta = np.linspace(-np.pi, np.pi, 20001)
+    plain = oriented_windows(theta, np.ones_like(theta), k)
+    quick = oriented_windows(theta, np.ones_like(theta), k, single=True)
+    band, at = np.nonzero(plain != quick)
+    if at.size == 0:
+        pytest.skip("this NumPy's power of a negative number is that of its absolute value")
+    f = np.float32(0.5) + np.float32(2.0**-24) * np.arange(at.size, dtype=np.float32)
+    midpoints = f.astype(np.float64) + np.spacing(f).astype(np.float64) / 2
+    highpass = midpoints / np.abs(plain[band, at])
+    expected = oriented_windows(theta[at], highpass, k).astype(np.complex64)
+    got = oriented_windows(theta[at], highpass, k, single=True).astype(np.complex64)
+    assert got.tobytes() == expected.tobytes()
+
+
+def test_the_solvers_sign_roots_and_eigenvalues_are_numpys():
+    for x in (0.0, -0.0, 1.5, -2.0, np.inf, -np.inf, np.nan, 5e-324, -5e-324):
+        assert np.asarray(moments._sign(x)).tobytes() == np.sign(np.float64(x)).tobytes()
+    rng = np.random.default_rng(7)
+    for degree in (2, 3, 4, 6):
+        for _ in range(20):
+            c = rng.standard_normal(degree + 1)
+            expected = np.polynomial.polynomial.polyroots(c)
+            got = moments._poly_roots(c)
+            assert got.dtype == expected.dtype and got.tobytes() == expected.tobytes()  # sorted
+            matrix = rng.standard_normal((degree, degree))
+            expected = np.linalg.eigvals(matrix)
+            got = moments._eigenvalues(matrix)
+            assert got.dtype == expected.dtype and got.tobytes() == expected.tobytes()
+    for bad in (np.nan, np.inf):
+        matrix = rng.standard_normal((3, 3))
+        matrix[1, 2] = bad
+        with pytest.raises(np.linalg.LinAlgError):
+            moments._eigenvalues(matrix)

@@ -129,7 +129,7 @@ def _poly_roots(c) -> np.ndarray:
 try:  # the compiled routine behind numpy.linalg.eigvals (its wrapper costs more than the call)
     from numpy.linalg import _umath_linalg as _linalg_routines
 except ImportError:  # pragma: no cover - another NumPy layout: the public function
-    _linalg_routines = None
+    _linalg_routines = None  # type: ignore[assignment]
 
 
 def _eigenvalues(matrix: np.ndarray) -> np.ndarray:

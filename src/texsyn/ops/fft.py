@@ -152,7 +152,8 @@ def irfft2(x, s: tuple[int, int], *, workers: int = 1, overwrite_x: bool = False
     """``scipy.fft.irfft2(x, s=s, workers=workers)``: the real ``s``-sized images of half
     spectra ``x`` whose last axis has ``s[1] // 2 + 1`` columns and the one before ``s[0]`` rows.
 
-    With ``overwrite_x`` a complex ``x`` is overwritten: pocketfft's two passes (the columns'
+    With ``overwrite_x`` a complex ``x`` is overwritten (unless it is read-only, which
+    ``scipy.fft`` accepts too): pocketfft's two passes (the columns'
     complex transforms, then the rows' real ones, scaled by ``1 / (h w)`` after the second,
     as one call scales them) run as two calls, the first in place, instead of the first
     writing a new array of the size of ``x``. The same bytes; measured on the 2-core
@@ -169,7 +170,7 @@ def irfft2(x, s: tuple[int, int], *, workers: int = 1, overwrite_x: bool = False
     if a.shape[-2:] != (h, w // 2 + 1):
         raise ValueError(f"half spectra of {a.shape[-2:]} do not fit images of {(h, w)}")
     threads = _threads(workers)
-    if not overwrite_x:
+    if not (overwrite_x and a.flags.writeable):  # a read-only array: as scipy.fft, not written
         return module.c2r(a, _last_two(a), w, False, _INVERSE, None, threads)
     columns, rows = _last_two(a)
     module.c2c(a, (columns,), False, _NONE, a, threads)

@@ -441,9 +441,11 @@ def add_product(out: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     For float32 row-major operands with an inner dimension of at most
     :data:`ADD_PRODUCT_MAX_INNER`, ``cblas_sgemm`` with ``beta = 1`` (:func:`cblas_sgemm`):
     BLAS sums each entry's products in a register, then adds it to ``out`` with one rounding,
-    the bits of ``out += a @ b`` (``tests/test_ops_linalg.py``), without writing and reading
-    back an array of the size of ``out`` (issue 20: 0.3 ms of a 12x65536 output). Other
-    arrays, small ones, operands that may overlap ``out``, or no ``cblas_sgemm``:
+    the bits of ``out += a @ b`` (``tests/test_ops_linalg_add_product.py``), without writing
+    and reading back an array of the size of ``out`` (issue 20: 0.3 ms of a 12x65536 output).
+    Other arrays, small ones, a single row or column (NumPy multiplies those with
+    ``sgemv``, whose sums are not ``sgemm``'s: a 1x3 by 3x65536 product differs in
+    thousands of values), operands that may overlap ``out``, or no ``cblas_sgemm``:
     ``out += a @ b``. Like ``@``, one BLAS thread
     inside :func:`fixed_order`.
 
@@ -465,6 +467,8 @@ def add_product(out: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         out.dtype == a.dtype == b.dtype == np.float32
         and k <= ADD_PRODUCT_MAX_INNER
         and m * n >= _ADD_PRODUCT_MIN_SIZE
+        and m > 1  # a row or a column: NumPy's product is sgemv, whose sums differ
+        and n > 1
         and a.shape == (m, k)
         and b.shape == (k, n)
         and all(
