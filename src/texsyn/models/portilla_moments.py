@@ -35,12 +35,12 @@ def is_flat(variance: float, mean: float) -> bool:
     return not variance > FLAT_VARIANCE * max(1.0, float(mean) ** 2)
 
 
-# Polynomials in the step ``l`` as coefficient arrays, lowest degree first. These helpers do
-# the arithmetic of ``numpy.polynomial.Polynomial`` (same trimming of zero leading
-# coefficients, same ``np.convolve`` products, same companion matrix and eigenvalue solver,
-# same identity map of the default domain) without its per-object overhead: the skewness and
-# kurtosis steps run a few thousand times per synthesis, and the objects cost more than the
-# arithmetic. ``tests/test_portilla.py`` checks that the results are the same bits.
+# Polynomials in the step ``l`` as coefficients, lowest degree first. These helpers do the
+# arithmetic of ``numpy.polynomial.Polynomial`` (same trimming of zero leading coefficients,
+# same ``np.convolve`` products, same companion matrix and eigenvalue solver, same identity
+# map of the default domain) without its per-object overhead: the skewness and kurtosis
+# steps run a few thousand times per synthesis, and the objects cost more than the
+# arithmetic. ``tests/test_portilla_fast_paths.py`` checks that the results are the same bits.
 _ZERO, _ONE = np.float64(0.0), np.float64(1.0)  # the default domain's map: off + scl x
 
 
@@ -60,44 +60,6 @@ def _series(c) -> np.ndarray:
     if type(c) is np.ndarray and c.dtype == np.float64 and c.ndim == 1:
         return _trim(c).copy()
     return np.array(_trim(np.array(c, ndmin=1, copy=None)), dtype=np.float64, copy=True)
-
-
-def _poly_mul(c1, c2) -> np.ndarray:
-    """``Polynomial(c1) * Polynomial(c2)`` (``polymul``)."""
-    return _trim(np.convolve(_series(c1), _series(c2)))
-
-
-def _poly_sub(c1, c2) -> np.ndarray:
-    """``Polynomial(c1) - Polynomial(c2)`` (``polyutils._sub``)."""
-    c1, c2 = _series(c1), _series(c2)
-    if len(c1) > len(c2):
-        c1[: c2.size] -= c2
-        return _trim(c1)
-    c2 = -c2
-    c2[: c1.size] += c1
-    return _trim(c2)
-
-
-def _poly_pow(c, power: int) -> np.ndarray:
-    """``Polynomial(c) ** power`` for ``power >= 2`` (``polypow``: repeated ``np.convolve``)."""
-    c = _series(c)
-    product = c
-    for _ in range(2, power + 1):
-        product = np.convolve(product, c)
-    return product
-
-
-def _poly_der(c) -> np.ndarray:
-    """``Polynomial(c).deriv()`` (``polyder`` with scale 1)."""
-    c = np.array(c, ndmin=1, copy=True, dtype=np.float64)
-    n = len(c)
-    if n <= 1:
-        return c[:1] * 0
-    c *= _ONE
-    der = np.empty(n - 1)
-    for j in range(n - 1, 0, -1):
-        der[j - 1] = j * c[j]
-    return der
 
 
 def _poly_val(c: np.ndarray, x):
