@@ -1,6 +1,7 @@
 """The ``texsyn`` command line. It only calls the public API; options come from the registry.
 
-``texsyn.cli:main`` is the console script's entry point (``docs/cli.md``). The parts:
+``texsyn.cli:run`` is the console script's entry point (``docs/cli.md``): :func:`main`, which
+returns the exit status, then the end of the process. The parts:
 
 - :mod:`~texsyn.cli.app`: the ``texsyn`` group, :func:`main`, exit statuses and the one-line
   messages (``docs/errors.md``);
@@ -30,6 +31,7 @@ from .app import (
     Terminated,
     cli,
     main,
+    run,
 )
 
 if TYPE_CHECKING:  # the names for type checkers; at run time ``__getattr__`` loads them
@@ -71,5 +73,6 @@ __all__ = [
     "list_methods",
     "main",
     "modify",
+    "run",
     "synth",
 ]

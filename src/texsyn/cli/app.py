@@ -26,13 +26,14 @@ runs (:data:`COMMANDS`).
 
 from __future__ import annotations
 
+import atexit
 import os
 import signal
 import sys
 import threading
 import traceback
 import warnings
-from typing import Any
+from typing import Any, NoReturn
 
 import click
 
@@ -51,8 +52,10 @@ __all__ = [
     "EXIT_TERMINATED",
     "Terminated",
     "cli",
+    "exit_process",
     "main",
     "report_error",
+    "run",
 ]
 
 EXIT_OK = 0
@@ -343,3 +346,49 @@ def main(argv: list[str] | None = None) -> int:
                 return EXIT_INTERRUPTED
         finally:
             restore()
+
+
+def run() -> NoReturn:
+    """The ``texsyn`` console script and ``python -m texsyn.cli``: :func:`main`, then the end
+    of the process (:func:`exit_process`)."""
+    exit_process(main())
+
+
+def exit_process(status: int) -> NoReturn:
+    """End the process with ``status``: what Python's exit does first, without its teardown.
+
+    At exit Python joins the threads that are not daemons, runs the :mod:`atexit`
+    functions, flushes ``stdout`` and ``stderr``, then takes every module and object apart
+    one by one: 15 to 30 ms of a texsyn command (``docs/performance.md``, "Start-up"), for
+    memory the system takes back at once when the process ends. This does the first three
+    and ends the process there (:func:`os._exit`). Python's own exit (:func:`sys.exit`)
+    runs instead where a thread other than texsyn's idle workers is still running, a
+    debugger, profiler or coverage tracer is attached, ``python -i`` is to follow, or a
+    stream cannot be flushed (a closed pipe: Python reports it as it always does).
+    """
+    linalg = sys.modules.get("texsyn.ops.linalg")  # the pool's module: loaded by every method, not by --help
+    if linalg is not None:
+        linalg.stop_thread_pool()
+    current = threading.current_thread()
+    running = [t for t in threading.enumerate() if t is not current and not t.daemon and t.is_alive()]
+    run_exit_functions = getattr(atexit, "_run_exitfuncs", None)
+    if (
+        running
+        or run_exit_functions is None
+        or current is not threading.main_thread()
+        or sys.gettrace() is not None
+        or sys.getprofile() is not None
+        or sys.flags.inspect
+    ):
+        sys.exit(status)
+    try:
+        for stream in (sys.stdout, sys.stderr):
+            if stream is not None:
+                stream.flush()
+        run_exit_functions()
+        for stream in (sys.stdout, sys.stderr):
+            if stream is not None:
+                stream.flush()
+    except BaseException:
+        sys.exit(status)
+    os._exit(status)

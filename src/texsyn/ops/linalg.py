@@ -45,6 +45,7 @@ __all__ = [
     "fixed_order",
     "matmul",
     "parallel_map",
+    "stop_thread_pool",
     "worker_count",
     "BLOCK_ROWS",
     "BLOCK_COLUMNS",
@@ -354,6 +355,17 @@ def _on_helpers(function: Callable, items: list) -> list:
         if not ok:
             raise value  # type: ignore[misc]
     return [value for _, value in results]
+
+
+def stop_thread_pool() -> None:
+    """End the threads of texsyn's pool (:func:`parallel_map`, :func:`matmul`) once their work
+    is done; a later call starts new ones. The command line calls it before it ends the
+    process (:func:`texsyn.cli.app.exit_process`)."""
+    global _pool
+    with _pool_lock:
+        pool, _pool = _pool, None
+    if pool is not None:
+        pool.shutdown(wait=True)
 
 
 def _thread_pool() -> ThreadPoolExecutor:
