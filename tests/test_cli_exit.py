@@ -114,8 +114,9 @@ def test_the_command_line_ends_with_its_status(tmp_path):
         [sys.executable, "-m", "texsyn.cli", "methods"], capture_output=True, text=True, env=env, timeout=120
     )
     assert listed.returncode == 0 and "quilting" in listed.stdout, listed.stderr
+    command = ["synth", str(tmp_path / "none.png"), "-o", str(tmp_path / "o.png")]
     missing = subprocess.run(
-        [sys.executable, "-m", "texsyn.cli", "synth", str(tmp_path / "none.png"), "-o", str(tmp_path / "o.png")],
+        [sys.executable, "-m", "texsyn.cli", *command],
         capture_output=True,
         text=True,
         env=env,
