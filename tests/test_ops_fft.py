@@ -100,3 +100,23 @@ def test_irfft2_leaves_a_read_only_input_alone_when_it_may_overwrite(use_scipy, 
     kept = half.copy()
     assert _same(fft.irfft2(half, s=(12, 15), overwrite_x=True), scipy.fft.irfft2(kept, s=(12, 15)))
     assert _same(half, kept)
+
+
+@pytest.mark.parametrize("use_scipy", [False, True])
+def test_transforms_write_into_a_given_array(use_scipy, monkeypatch):
+    # a stack shared between two threads: each half written into its part of one array
+    if use_scipy:
+        monkeypatch.setattr(fft, "_pocketfft", lambda: None)
+    rng = np.random.default_rng(1)
+    x = rng.standard_normal((4, 16, 12)).astype(np.float32)
+    half = np.full((4, 16, 7), np.nan, dtype=np.complex64)
+    assert fft.rfft2(x[:2], out=half[:2]) is not None and fft.rfft2(x[2:], out=half[2:]) is not None
+    assert _same(half, scipy.fft.rfft2(x))
+    y = (x + 1j * rng.standard_normal(x.shape)).astype(np.complex64)
+    full = np.full(y.shape, np.nan, dtype=np.complex64)
+    assert fft.fft2(y[:2], out=full[:2]) is not None and fft.fft2(y[2:], out=full[2:]) is not None
+    assert _same(full, scipy.fft.fft2(y))
+    # the complex transform of real images (the pyramid's first), into complex halves
+    full[:] = np.nan
+    assert fft.fft2(x[:2], out=full[:2]) is not None and fft.fft2(x[2:], out=full[2:]) is not None
+    assert _same(full, scipy.fft.fft2(x))

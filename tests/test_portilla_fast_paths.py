@@ -171,7 +171,25 @@ def _steps(previous):
     before the power sums and cosine products (``previous``), or the library's."""
     if previous:
         return _skewness, _kurtosis, _autocorrelation
-    return moments.impose_skewness, moments.impose_kurtosis, projections.impose_autocorrelation
+    return (
+        moments.impose_skewness,
+        moments.impose_kurtosis,
+        _one_at_a_time(projections.impose_autocorrelation),
+    )
+
+
+def _one_at_a_time(step):
+    """``step`` on each image of a stack alone: never shared between two threads, the
+    reference of the shared halves (``complex_steerable.shared_stack``)."""
+
+    def run(images, target):
+        flat = images.reshape((-1,) + images.shape[-2:])
+        targets = np.broadcast_to(target, images.shape[:-2] + target.shape[-2:]).reshape(
+            (-1,) + target.shape[-2:]
+        )
+        return np.stack([step(image, window) for image, window in zip(flat, targets)]).reshape(images.shape)
+
+    return run
 
 
 def _lowpass(images, autocorr, skew_kurt, pixel_var, lags, previous=True, shape=None):
@@ -382,10 +400,12 @@ def _fitted(colour: str):
 @pytest.mark.parametrize("cpus", [1, 3])
 def test_the_iteration_gives_the_plain_loops_bytes(colour, shape, cpus, monkeypatch):
     # 128x128 bands go one by one (for_each_band), 72x90 all at once, with odd band sizes;
-    # the larger FFTs use ``cpus`` threads
+    # the larger FFTs use ``cpus`` threads, and with more than one CPU the 128x128 stacks
+    # are shared between two threads (shared_stack)
     monkeypatch.setattr(complex_steerable, "worker_count", lambda: cpus)
     monkeypatch.setattr(complex_steerable, "_THREADED_FFT", 1 << 12)
     monkeypatch.setattr(complex_steerable, "_THREADED_FFT_REALTIME", 1 << 12)
+    monkeypatch.setattr(complex_steerable, "_SHARED_VALUES", 1 << 15)
     model = _fitted(colour)
     target = model.statistics_
     pyramid = ComplexSteerablePyramid(shape, target.n_scales, target.n_orientations, single=True)
@@ -665,3 +685,49 @@ def test_the_solvers_sign_roots_and_eigenvalues_are_numpys():
         matrix[1, 2] = bad
         with pytest.raises(np.linalg.LinAlgError):
             moments._eigenvalues(matrix)
+
+
+def test_a_stack_is_shared_where_it_is_large_enough(monkeypatch):
+    # the rule: bands of 2^14 pixels or more, 2^18 values or more in all, more than one CPU
+    monkeypatch.setattr(complex_steerable, "worker_count", lambda: 2)
+    shared = complex_steerable.shared_stack
+    assert shared(4, 256 * 256) and shared(12, 256 * 256) and shared(12, 512 * 512)
+    assert not shared(12, 128 * 128)  # a 128x128 colour level: the hand-overs cost what they save
+    assert not shared(4, 128 * 128) and not shared(64, 64 * 64) and not shared(1, 1 << 20)
+    monkeypatch.setattr(complex_steerable, "worker_count", lambda: 1)
+    assert not shared(12, 512 * 512)
+
+
+@pytest.mark.parametrize("cpus", [1, 2])
+def test_the_iterations_stacks_go_in_two_halves_on_more_than_one_cpu(cpus, monkeypatch):
+    # the forward bands, their parents, magnitudes, real parts and transforms, and the
+    # magnitudes' auto-correlation filter of the 128x128 colour level (lowered threshold)
+    model = _fitted("rgb")
+    target = model.statistics_
+    pyramid = ComplexSteerablePyramid((128, 128), target.n_scales, target.n_orientations, single=True)
+    monkeypatch.setattr(complex_steerable, "worker_count", lambda: cpus)
+    monkeypatch.setattr(complex_steerable, "_SHARED_VALUES", 1 << 16)  # 12 bands, not 3 channels
+    halves: list = []
+    share = complex_steerable.parallel_map
+
+    def recorded(function, items):
+        halves.append(
+            (function.__qualname__.split(".<locals>")[0], [(item.start, item.stop) for item in items])
+        )
+        return share(function, items)
+
+    monkeypatch.setattr(complex_steerable, "parallel_map", recorded)
+    x = np.random.default_rng(0).standard_normal((3, 128, 128)) + 0.5
+    project_statistics(x, target, pyramid, model.lags, workspace={})
+    if cpus == 1:
+        assert halves == []
+    else:
+        assert all(items == [(0, 6), (6, 12)] for _, items in halves)  # the channels' steps stay whole
+        assert {name for name, _ in halves} == {
+            "ComplexSteerablePyramid._bands",
+            "parent_rows",
+            "centred_magnitudes",
+            "filter_autocorrelation",
+            "magnitude_real_parts",
+            "_stack_transform",
+        }

@@ -103,9 +103,10 @@ def _last_two(x: np.ndarray) -> tuple[int, int]:
     return (x.ndim - 2, x.ndim - 1)
 
 
-def fft2(x, *, workers: int = 1, overwrite_x: bool = False) -> np.ndarray:
-    """``scipy.fft.fft2(x, workers=workers, overwrite_x=overwrite_x)`` (last two axes)."""
-    return _complex_2d(x, True, workers, overwrite_x)
+def fft2(x, *, workers: int = 1, overwrite_x: bool = False, out: np.ndarray | None = None) -> np.ndarray:
+    """``scipy.fft.fft2(x, workers=workers, overwrite_x=overwrite_x)`` (last two axes); written
+    into ``out`` if given (complex, of ``x``'s shape and precision)."""
+    return _complex_2d(x, True, workers, overwrite_x, out)
 
 
 def ifft2(x, *, workers: int = 1, overwrite_x: bool = False) -> np.ndarray:
@@ -113,14 +114,21 @@ def ifft2(x, *, workers: int = 1, overwrite_x: bool = False) -> np.ndarray:
     return _complex_2d(x, False, workers, overwrite_x)
 
 
-def _complex_2d(x, forward: bool, workers: int, overwrite_x: bool) -> np.ndarray:
+def _complex_2d(
+    x, forward: bool, workers: int, overwrite_x: bool, out: np.ndarray | None = None
+) -> np.ndarray:
     """The complex transform of the last two axes, forward or inverse, as ``scipy.fft`` makes it."""
     module = _pocketfft()
     if module is None:
         transform = _scipy_fft().fft2 if forward else _scipy_fft().ifft2
-        return transform(x, workers=workers, overwrite_x=overwrite_x)
+        result = transform(x, workers=workers, overwrite_x=overwrite_x)
+        if out is None:
+            return result
+        out[...] = result
+        return out
     a = _as_float(x)
-    out = a if overwrite_x and a.dtype.kind == "c" else None
+    if out is None and overwrite_x and a.dtype.kind == "c":
+        out = a
     return module.c2c(a, _last_two(a), forward, _NONE if forward else _INVERSE, out, _threads(workers))
 
 
@@ -137,15 +145,20 @@ def ifft(x, axis: int = -1, *, norm: str | None = None, workers: int = 1, overwr
     return module.c2c(a, axes, False, _NONE if norm == "forward" else _INVERSE, out, _threads(workers))
 
 
-def rfft2(x, *, workers: int = 1) -> np.ndarray:
-    """``scipy.fft.rfft2(x, workers=workers)`` of a real array (last two axes)."""
+def rfft2(x, *, workers: int = 1, out: np.ndarray | None = None) -> np.ndarray:
+    """``scipy.fft.rfft2(x, workers=workers)`` of a real array (last two axes); written into
+    ``out`` if given (complex, ``x``'s shape but ``w // 2 + 1`` columns, its precision)."""
     module = _pocketfft()
     if module is None:
-        return _scipy_fft().rfft2(x, workers=workers)
+        result = _scipy_fft().rfft2(x, workers=workers)
+        if out is None:
+            return result
+        out[...] = result
+        return out
     a = _as_float(x)
     if a.dtype.kind == "c":
         raise TypeError("rfft2 needs a real array")
-    return module.r2c(a, _last_two(a), True, _NONE, None, _threads(workers))
+    return module.r2c(a, _last_two(a), True, _NONE, out, _threads(workers))
 
 
 def irfft2(x, s: tuple[int, int], *, workers: int = 1, overwrite_x: bool = False) -> np.ndarray:

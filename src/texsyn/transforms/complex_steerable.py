@@ -35,7 +35,7 @@ from ..ops.fft import inverse_norm as inverse_norm  # re-exported (its home befo
 from ..ops.linalg import parallel_map, worker_count
 from .steerable import crop_indices, oriented_windows, pyramid_sizes, radial_lowpass
 
-__all__ = ["ComplexSteerablePyramid", "fft_workers", "for_each_band", "inverse_norm"]
+__all__ = ["ComplexSteerablePyramid", "fft_workers", "for_each_band", "inverse_norm", "shared_stack"]
 
 
 @functools.cache
@@ -65,8 +65,13 @@ def _runs(indices: np.ndarray) -> list[tuple[slice, slice]]:
     ]
 
 
-#: bands of this many pixels or more are processed one at a time
+#: bands of this many pixels or more are processed one at a time, or, in a stack of
+#: :data:`_SHARED_VALUES` values or more, half of them on a second thread (:func:`shared_stack`)
 _BAND_BY_BAND = 1 << 14
+#: a stack's values from which its halves go to two threads: a 256x256 level's four grey or
+#: twelve colour bands, a 512x512 image's three channels; not a 128x128 level's twelve
+#: colour bands, nor a 256x256 image's three channels (their hand-overs cost what they save)
+_SHARED_VALUES = 1 << 18
 #: FFTs of this many values or more use every CPU of the process (a 512x512 level's
 #: twelve colour bands; a 256x256 level's are transformed on one thread) ...
 _THREADED_FFT = 1 << 21
@@ -118,23 +123,64 @@ def _row_blocks(size: tuple[int, int]) -> list[slice]:
     return [slice(start, min(start + rows, h)) for start in range(0, h, rows)]
 
 
+def shared_stack(count: int, size: int) -> bool:
+    """Whether a stack of ``count`` bands (or channels) of ``size`` pixels is shared between two
+    threads (:func:`for_each_band`): two bands or more, of :data:`_BAND_BY_BAND` pixels or
+    more, :data:`_SHARED_VALUES` values or more in all, and more than one CPU for texsyn's
+    threads (:func:`~texsyn.ops.linalg.worker_count`).
+
+    Measured on the 2-core machine, Portilla-Simoncelli's loop, 20 iterations in process
+    (issue 20, ninth round): 256x256 colour 1.24 -> 1.07 s, grey 0.41 -> 0.39 s; 512x512 (5
+    iterations) colour 1.37 -> 1.10 s, grey 0.49 -> 0.42 s. Sharing the 128x128 colour
+    level's twelve bands, or a 256x256 image's three channels (whose skewness and kurtosis
+    steps are mostly Python, which holds the GIL), gained nothing or lost
+    (``docs/methods/portilla_simoncelli.md``, "Performance").
+    """
+    return size >= _BAND_BY_BAND and count * size >= _SHARED_VALUES and count > 1 and worker_count() > 1
+
+
 def for_each_band(function: Callable[[slice], None], count: int, size: int) -> None:
     """Call ``function(bands)`` on slices ``bands`` that cover ``range(count)``.
 
-    Bands of ``size`` pixels or more go one at a time: a chain of NumPy operations on one
-    band stays in the processor's cache, which a whole pyramid level does not fit (measured:
-    the phase doubling of twelve 256x256 bands takes half the time band by band). Smaller
-    bands go all at once (fewer Python and FFT call overheads). ``function`` must compute
-    each band the same way whatever the slice, so that the bytes do not depend on it.
+    - A stack that :func:`shared_stack` shares (a 256x256 level's bands) goes as two halves,
+      the second on one of texsyn's threads (:func:`~texsyn.ops.linalg.parallel_map`), each
+      half's operations on its bands at once: the GIL is released for each operation's
+      work, and few operations leave few hand-overs of it.
+    - Otherwise bands of ``size`` pixels or more go one at a time: a chain of NumPy
+      operations on one band stays in the processor's cache, which a whole pyramid level
+      does not fit (measured: the phase doubling of twelve 256x256 bands takes half the time
+      band by band).
+    - Smaller bands go all at once (fewer Python and FFT call overheads).
 
-    Threads were tried (the bands shared among texsyn's threads): on the 2-core benchmark
-    machine they burnt 40 % more CPU for no shorter run.
+    ``function`` must compute each band the same way whatever the slice and whichever the
+    thread, so that the bytes depend on neither.
     """
-    if size < _BAND_BY_BAND:
+    if shared_stack(count, size):
+        half = (count + 1) // 2
+        parallel_map(function, [slice(0, half), slice(half, count)])
+    elif size < _BAND_BY_BAND:
         function(slice(0, count))
-        return
-    for i in range(count):
-        function(slice(i, i + 1))
+    else:
+        for i in range(count):
+            function(slice(i, i + 1))
+
+
+def _stack_transform(transform: Callable, x: np.ndarray, columns: int) -> np.ndarray:
+    """``transform(x)`` (:func:`texsyn.ops.fft.fft2` or ``rfft2``; ``columns`` of output),
+    half of a :func:`shared_stack` on a second thread (each line is transformed the same way:
+    the same bytes), else on :func:`fft_workers` threads."""
+    h, w = x.shape[-2:]
+    count = x.size // max(h * w, 1)
+    if not (x.flags.c_contiguous and shared_stack(count, h * w)):
+        return transform(x, workers=fft_workers(x.size))
+    flat = x.reshape(count, h, w)
+    out = np.empty((count, h, columns), dtype=np.result_type(x.dtype, np.complex64))
+
+    def run(bands: slice) -> None:
+        transform(flat[bands], out=out[bands])
+
+    for_each_band(run, count, h * w)
+    return out.reshape(x.shape[:-2] + (h, columns))
 
 
 class ComplexSteerablePyramid:
@@ -254,14 +300,14 @@ class ComplexSteerablePyramid:
         """
         x = np.asarray(x)
         dtype = np.result_type(self.real_dtype, np.complex64) if np.iscomplexobj(x) else self.real_dtype
-        return pocketfft.fft2(x.astype(dtype, copy=False), workers=fft_workers(x.size))
+        return _stack_transform(pocketfft.fft2, x.astype(dtype, copy=False), x.shape[-1])
 
     def rfft(self, x: np.ndarray) -> np.ndarray:
         """``rfft2`` of real arrays in the pyramid's precision: the columns ``0 .. w // 2`` of
         :meth:`fft` (pocketfft computes the full transform of real data as this half, then
         mirrors it: the same bytes), in half the time."""
         x = np.asarray(x)
-        return pocketfft.rfft2(x.astype(self.real_dtype, copy=False), workers=fft_workers(x.size))
+        return _stack_transform(pocketfft.rfft2, x.astype(self.real_dtype, copy=False), x.shape[-1] // 2 + 1)
 
     def irfft(self, half: np.ndarray, level: int = 0, *, overwrite: bool = False) -> np.ndarray:
         """The real image of the size of ``level`` from its half spectrum (``irfft2``;
@@ -385,23 +431,29 @@ class ComplexSteerablePyramid:
         """``ifft(low[:, None] * analytic_filters[level])``: each line is transformed the same
         way whichever the batch, so these are the bytes of band-by-band transforms.
 
-        Bands of :data:`_BAND_BY_BAND` pixels or more go one at a time, product then
-        transform, while the band is in the cache (a 256x256 colour level: 5.0 -> 4.2 ms on
-        the 2-core machine, in the synthesis loop); a level whose transform is threaded
+        A level that :func:`shared_stack` shares goes in two halves on two threads, each
+        half's products then one transform of its bands (a 256x256 colour level: 4.4 -> 2.8
+        ms on the 2-core machine, in the synthesis loop). Otherwise bands of
+        :data:`_BAND_BY_BAND` pixels or more go one at a time, product then transform, while
+        the band is in the cache (5.0 -> 4.2 ms); a level whose transform is threaded
         (:func:`fft_workers`) goes at once, products then one transform of all the bands.
         """
         filters = self.analytic_filters[level]
         c, k = low.shape[0], filters.shape[0]
         out = np.empty((c, k) + low.shape[1:], dtype=np.result_type(low.dtype, filters.dtype))
+        size = low.shape[-1] * low.shape[-2]
         workers = fft_workers(out.size)
-        if workers > 1 or low.shape[-1] * low.shape[-2] < _BAND_BY_BAND:
+        if not shared_stack(c * k, size) and (workers > 1 or size < _BAND_BY_BAND):
             np.multiply(low[:, None], filters, out=out)
             return pocketfft.ifft2(out, overwrite_x=True, workers=workers)  # in place
-        for channel in range(c):
-            for orientation in range(k):
-                band = out[channel, orientation]
-                np.multiply(low[channel], filters[orientation], out=band)
-                pocketfft.ifft2(band, overwrite_x=True)
+        flat = out.reshape((c * k,) + low.shape[1:])
+
+        def run(bands: slice) -> None:
+            for i in range(bands.start, bands.stop):
+                np.multiply(low[i // k], filters[i % k], out=flat[i])
+            pocketfft.ifft2(flat[bands], overwrite_x=True)  # in place
+
+        for_each_band(run, c * k, size)
         return out
 
     def lowpass_image(self, residual: np.ndarray) -> np.ndarray:
