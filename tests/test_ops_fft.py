@@ -120,3 +120,26 @@ def test_transforms_write_into_a_given_array(use_scipy, monkeypatch):
     full[:] = np.nan
     assert fft.fft2(x[:2], out=full[:2]) is not None and fft.fft2(x[2:], out=full[2:]) is not None
     assert _same(full, scipy.fft.fft2(x))
+
+
+@pytest.mark.parametrize("use_scipy", [False, True])
+def test_a_given_array_of_another_shape_or_type_is_refused(use_scipy, monkeypatch):
+    # pocketfft checks the type of ``out`` only: an array too small was written past its end
+    if use_scipy:
+        monkeypatch.setattr(fft, "_pocketfft", lambda: None)
+    x = np.random.default_rng(2).standard_normal((4, 16, 12)).astype(np.float32)
+    stack = np.zeros((4, 16, 12), dtype=np.complex64)
+    for transform, columns in ((fft.rfft2, 7), (fft.fft2, 12)):
+        with pytest.raises(ValueError, match="shape"):
+            transform(x, out=stack[:1, :, :columns])  # the first image's part of a stack
+        with pytest.raises(ValueError, match="shape"):
+            transform(x[:1], out=stack[:, :, :columns])  # no broadcasting either
+        assert not stack.any()
+        for dtype in (np.complex128, np.float32):
+            with pytest.raises(TypeError, match="complex64"):
+                transform(x, out=np.zeros((4, 16, columns), dtype=dtype))
+        with pytest.raises(TypeError, match="complex128"):
+            transform(x.astype(np.float64), out=np.zeros((4, 16, columns), dtype=np.complex64))
+    # of the right shape and type, a strided view is written in place
+    view = np.zeros((4, 16, 14), dtype=np.complex64)[..., ::2]
+    assert fft.rfft2(x, out=view) is view and _same(view.copy(), scipy.fft.rfft2(x))

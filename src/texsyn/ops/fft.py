@@ -97,6 +97,22 @@ def _threads(workers: int) -> int:
     return workers
 
 
+def _check_out(out: np.ndarray, shape: tuple[int, ...], dtype: np.dtype) -> None:
+    """Refuse an ``out`` that is not the transform's: ``shape``, and the complex type of the
+    input's precision (of ``dtype`` as :func:`_as_float` converts it). pocketfft checks the
+    type only and writes the input's shape through ``out``'s strides, past its end when it is
+    smaller; ``scipy.fft``'s result would be broadcast or cast into it."""
+    if dtype == np.float16 or dtype.kind in "fc":
+        expected = np.result_type(np.float32 if dtype == np.float16 else dtype, np.complex64)
+    else:
+        expected = np.dtype(np.complex128)
+    if not isinstance(out, np.ndarray) or out.dtype != expected:
+        got = out.dtype if isinstance(out, np.ndarray) else type(out).__name__
+        raise TypeError(f"out must be an array of {expected}, got {got}")
+    if out.shape != shape:
+        raise ValueError(f"out must have the shape {shape}, got {out.shape}")
+
+
 def _last_two(x: np.ndarray) -> tuple[int, int]:
     if x.ndim < 2:
         raise ValueError("a 2-D transform needs at least two axes")
@@ -106,6 +122,9 @@ def _last_two(x: np.ndarray) -> tuple[int, int]:
 def fft2(x, *, workers: int = 1, overwrite_x: bool = False, out: np.ndarray | None = None) -> np.ndarray:
     """``scipy.fft.fft2(x, workers=workers, overwrite_x=overwrite_x)`` (last two axes); written
     into ``out`` if given (complex, of ``x``'s shape and precision)."""
+    if out is not None:
+        x = np.asarray(x)
+        _check_out(out, x.shape, x.dtype)
     return _complex_2d(x, True, workers, overwrite_x, out)
 
 
@@ -148,6 +167,9 @@ def ifft(x, axis: int = -1, *, norm: str | None = None, workers: int = 1, overwr
 def rfft2(x, *, workers: int = 1, out: np.ndarray | None = None) -> np.ndarray:
     """``scipy.fft.rfft2(x, workers=workers)`` of a real array (last two axes); written into
     ``out`` if given (complex, ``x``'s shape but ``w // 2 + 1`` columns, its precision)."""
+    if out is not None:
+        x = np.asarray(x)
+        _check_out(out, x.shape[:-1] + (x.shape[-1] // 2 + 1,), x.dtype)
     module = _pocketfft()
     if module is None:
         result = _scipy_fft().rfft2(x, workers=workers)
