@@ -731,3 +731,25 @@ def test_the_iterations_stacks_go_in_two_halves_on_more_than_one_cpu(cpus, monke
             "magnitude_real_parts",
             "_stack_transform",
         }
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_band_of_zeros_gives_the_same_bytes_on_one_and_two_cpus(seed, monkeypatch):
+    # a constant channel (a colour exemplar without blue) has bands of zeros: their systems
+    # are singular, and the stack's least squares replaces its solves; shared in halves, the
+    # other half solved its own, which gave other bits than on one CPU
+    from scipy.ndimage import gaussian_filter
+
+    monkeypatch.setattr(complex_steerable, "_SHARED_VALUES", 1 << 14)
+    rng = np.random.default_rng(seed)
+    x = gaussian_filter(rng.standard_normal((4, 128, 128)), (0, 1 + seed, 2), mode="wrap")
+    x = x.astype(np.float32)
+    x[seed] = 0.0
+    lag = 1 + seed
+    decay = np.exp(-np.abs(np.arange(-lag, lag + 1)) / (1 + np.arange(4)[:, None]))
+    target = decay[:, :, None] * decay[:, None, :]
+    filtered = {}
+    for cpus in (1, 2):
+        monkeypatch.setattr(complex_steerable, "worker_count", lambda cpus=cpus: cpus)
+        filtered[cpus] = projections.filter_autocorrelation(x, target)
+    assert filtered[1].tobytes() == filtered[2].tobytes()

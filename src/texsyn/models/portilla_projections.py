@@ -89,17 +89,31 @@ def filter_autocorrelation(x: np.ndarray, target: np.ndarray) -> np.ndarray:
     out = np.empty((count, h, w), dtype=np.float32)
 
     def run(bands: slice) -> None:
-        out[bands] = filter_autocorrelation_spectrum(pocketfft.rfft2(images[bands]), targets[bands], (h, w))
+        spec = pocketfft.rfft2(images[bands])
+        out[bands] = filter_autocorrelation_spectrum(spec, targets[bands], (h, w), least_squares=False)
 
-    for_each_band(run, count, h * w)
+    try:
+        for_each_band(run, count, h * w)
+    except np.linalg.LinAlgError:
+        # a singular system (a band of zeros: a constant channel) makes the least squares
+        # replace the solves of the whole stack, not of its half: the stack at once, as on
+        # one CPU (the bytes do not depend on the halves)
+        spec = pocketfft.rfft2(x, workers=fft_workers(x.size))
+        return filter_autocorrelation_spectrum(spec, target, (h, w))
     return out.reshape(x.shape)
 
 
-def filter_autocorrelation_spectrum(spec: np.ndarray, target: np.ndarray, shape: tuple) -> np.ndarray:
+def filter_autocorrelation_spectrum(
+    spec: np.ndarray, target: np.ndarray, shape: tuple, *, least_squares: bool = True
+) -> np.ndarray:
     """:func:`filter_autocorrelation` of the images of size ``shape`` given by their half
     spectra ``spec`` (``rfft2``, single precision; overwritten), for a window wider than a
     pixel: the synthesis loop's partial reconstructions are spectra already
-    (``docs/methods/portilla_simoncelli.md``, "Performance")."""
+    (``docs/methods/portilla_simoncelli.md``, "Performance").
+
+    Where one image's system is singular, every image's filter is solved by least squares;
+    without ``least_squares``, :class:`numpy.linalg.LinAlgError` is raised instead.
+    """
     h, w = shape
     lag = (target.shape[-1] - 1) // 2
     power = np.square(spec.real)
@@ -112,6 +126,8 @@ def filter_autocorrelation_spectrum(spec: np.ndarray, target: np.ndarray, shape:
     try:
         coef = np.linalg.solve(a, b[..., None])[..., 0]
     except np.linalg.LinAlgError:
+        if not least_squares:
+            raise
         coef = np.stack(
             [
                 np.linalg.lstsq(ai, bi, rcond=None)[0]
