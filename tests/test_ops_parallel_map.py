@@ -99,3 +99,46 @@ def test_one_item_per_worker_runs_on_the_helpers_and_awaits_every_item(monkeypat
     # pool, a helper runs it itself: no deadlock
     nested = linalg.parallel_map(lambda i: linalg.parallel_map(lambda j: 10 * i + j, range(2)), range(2))
     assert nested == [[0, 1], [10, 11]]
+
+
+class _Interrupted(Exception):
+    pass
+
+
+def test_an_interruption_while_waiting_for_a_helper_awaits_it_and_leaves_the_helpers_sound(monkeypatch):
+    # Ctrl-C in a Python session while the caller waits for a helper's item (half of a
+    # Portilla-Simoncelli stack): the item was not awaited, the next call took its result
+    # as its own, and the call after that waited for ever
+    import signal
+
+    def interrupt(signum, frame):
+        raise _Interrupted()
+
+    monkeypatch.setattr(linalg, "worker_count", lambda: 2)
+    previous = signal.signal(signal.SIGUSR1, interrupt)
+    finished = []
+
+    def slow(i: int) -> tuple[str, int]:
+        if i == 1:
+            time.sleep(0.3)
+            finished.append(i)
+        return ("slow", i)
+
+    main = threading.main_thread().ident
+    assert main == threading.get_ident()
+    timer = threading.Timer(0.1, signal.pthread_kill, (main, signal.SIGUSR1))
+    try:
+        timer.start()
+        with pytest.raises(_Interrupted):
+            linalg.parallel_map(slow, range(2))
+    finally:
+        timer.join()
+        signal.signal(signal.SIGUSR1, previous)
+    assert finished == [1]  # awaited: nothing of the call left writing after its exception
+    guard = ThreadPoolExecutor(max_workers=1)  # the test's own guard against a hang
+    try:
+        for name in ("fast", "again"):
+            call = guard.submit(linalg.parallel_map, lambda i, name=name: (name, i), range(2))
+            assert call.result(timeout=10) == [(name, 0), (name, 1)]
+    finally:
+        guard.shutdown(wait=False)

@@ -32,6 +32,7 @@ import functools
 import inspect
 import os
 import threading
+import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor, wait
 from contextlib import contextmanager
@@ -321,7 +322,9 @@ class _Helper:
         _mark_worker_thread()
         while True:
             self._go.acquire()
-            function, item = self._job  # type: ignore[misc]
+            if self._job is None:  # retired (:meth:`retire`)
+                return
+            function, item = self._job
             try:
                 self._result = (True, function(item))
             except BaseException as error:  # handed to the caller
@@ -338,19 +341,39 @@ class _Helper:
         result, self._result = self._result, (True, None)
         return result
 
+    def retire(self) -> None:
+        """Wait until the item handed over is done, then end the thread: after an exception
+        raised in :meth:`finish` (a signal's), whether its wait took the lock is unknown."""
+        while self._job is not None:
+            time.sleep(0.001)
+        self._go.release()
+
 
 def _on_helpers(function: Callable, items: list) -> list:
     """:func:`parallel_map` of at most one item per worker: the caller computes the first item,
     a helper thread each other one; every item is awaited before an error is raised."""
     while len(_helpers) < len(items) - 1:
         _helpers.append(_Helper())
-    for helper, item in zip(_helpers, items[1:]):
+    busy = _helpers[: len(items) - 1]
+    for helper, item in zip(busy, items[1:]):
         helper.start(function, item)
     try:
         first: tuple[bool, object] = (True, function(items[0]))
     except BaseException as error:
         first = (False, error)
-    results = [first] + [helper.finish() for helper in _helpers[: len(items) - 1]]
+    results = [first]
+    for index, helper in enumerate(busy):
+        try:
+            results.append(helper.finish())
+        except BaseException:
+            # raised by a signal during the wait (Ctrl-C in a Python session): the helpers
+            # not yet waited for are awaited all the same (nothing of the call goes on
+            # writing behind the exception) and replaced, so that no later call takes their
+            # result as its own
+            del _helpers[index : len(busy)]
+            for stale in busy[index:]:
+                stale.retire()
+            raise
     for ok, value in results:
         if not ok:
             raise value  # type: ignore[misc]
