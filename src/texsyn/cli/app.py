@@ -359,7 +359,8 @@ def exit_process(status: int) -> NoReturn:
 
     At exit Python joins the threads that are not daemons, runs the :mod:`atexit`
     functions, flushes ``stdout`` and ``stderr``, then takes every module and object apart
-    one by one: 15 to 30 ms of a texsyn command (``docs/performance.md``, "Start-up"), for
+    one by one: 20 ms to 0.2 s of a texsyn command, the most where numba is loaded
+    (``docs/performance.md``, "Start-up"), for
     memory the system takes back at once when the process ends. This does the first three
     and ends the process there (:func:`os._exit`). Python's own exit (:func:`sys.exit`)
     runs instead where a thread other than texsyn's idle workers is still running, a
