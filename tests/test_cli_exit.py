@@ -125,3 +125,16 @@ def test_the_command_line_ends_with_its_status(tmp_path):
     assert missing.returncode == 2
     assert missing.stderr.count("\n") == 1 and missing.stderr.startswith("texsyn: error:")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_command_started_without_stdout_still_succeeds(tmp_path):
+    # ``texsyn synth ... >&-``: Python gives no sys.stdout; the outputs are files
+    out = tmp_path / "out.png"
+    command = (
+        f"exec {sys.executable} -m texsyn.cli synth builtin:gravel -m quilting --size 48x48 -o {out} >&-"
+    )
+    done = subprocess.run(
+        ["sh", "-c", command], capture_output=True, text=True, env=python_env(), timeout=120
+    )
+    assert done.returncode == 0, done.stderr
+    assert "error" not in done.stderr and out.exists()

@@ -320,7 +320,8 @@ def _run(args: list[str], state: State) -> int:
         else:
             with cli.make_context("texsyn", list(args), obj=state) as ctx:
                 cli.invoke(ctx)
-        sys.stdout.flush()  # a closed pipe shows here, not at exit
+        if sys.stdout is not None:  # None: started with its descriptor closed (``>&-``)
+            sys.stdout.flush()  # a closed pipe shows here, not at exit
         return EXIT_OK
     except click.exceptions.Exit as exc:
         return exc.exit_code
