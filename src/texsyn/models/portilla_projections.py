@@ -80,27 +80,26 @@ def filter_autocorrelation(x: np.ndarray, target: np.ndarray) -> np.ndarray:
         return x * np.sqrt(target[..., :1, :1] / np.where(cur > 0, cur, 1.0))
     x = np.asarray(x, dtype=np.float32)
     count = x.size // (h * w)
-    if not (shared_stack(count, h * w) and target.shape[:-2] == x.shape[:-2] and x.flags.c_contiguous):
-        spec = pocketfft.rfft2(x, workers=fft_workers(x.size))
-        return filter_autocorrelation_spectrum(spec, target, (h, w))
-    # a shared stack (a 256x256 level's bands): half of them on a second thread, each band
-    # filtered as it is alone (the same bytes)
-    images, targets = x.reshape(count, h, w), target.reshape((count,) + target.shape[-2:])
-    out = np.empty((count, h, w), dtype=np.float32)
+    if shared_stack(count, h * w) and target.shape[:-2] == x.shape[:-2] and x.flags.c_contiguous:
+        # a shared stack (a 256x256 level's bands): half of them on a second thread, each band
+        # filtered as it is alone (the same bytes)
+        images, targets = x.reshape(count, h, w), target.reshape((count,) + target.shape[-2:])
+        out = np.empty((count, h, w), dtype=np.float32)
 
-    def run(bands: slice) -> None:
-        spec = pocketfft.rfft2(images[bands])
-        out[bands] = filter_autocorrelation_spectrum(spec, targets[bands], (h, w), least_squares=False)
+        def run(bands: slice) -> None:
+            spec = pocketfft.rfft2(images[bands])
+            out[bands] = filter_autocorrelation_spectrum(spec, targets[bands], (h, w), least_squares=False)
 
-    try:
-        for_each_band(run, count, h * w)
-    except np.linalg.LinAlgError:
-        # a singular system (a band of zeros: a constant channel) makes the least squares
-        # replace the solves of the whole stack, not of its half: the stack at once, as on
-        # one CPU (the bytes do not depend on the halves)
-        spec = pocketfft.rfft2(x, workers=fft_workers(x.size))
-        return filter_autocorrelation_spectrum(spec, target, (h, w))
-    return out.reshape(x.shape)
+        try:
+            for_each_band(run, count, h * w)
+            return out.reshape(x.shape)
+        except np.linalg.LinAlgError:
+            # a singular system (a band of zeros: a constant channel) makes the least squares
+            # replace the solves of the whole stack, not of its half: the stack at once
+            # below, as on one CPU (the bytes do not depend on the halves)
+            pass
+    spec = pocketfft.rfft2(x, workers=fft_workers(x.size))
+    return filter_autocorrelation_spectrum(spec, target, (h, w))
 
 
 def filter_autocorrelation_spectrum(

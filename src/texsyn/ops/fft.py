@@ -113,6 +113,14 @@ def _check_out(out: np.ndarray, shape: tuple[int, ...], dtype: np.dtype) -> None
         raise ValueError(f"out must have the shape {shape}, got {out.shape}")
 
 
+def _written(result: np.ndarray, out: np.ndarray | None) -> np.ndarray:
+    """``scipy.fft``'s ``result`` (the fallback), copied into ``out`` where one is given."""
+    if out is None:
+        return result
+    out[...] = result
+    return out
+
+
 def _last_two(x: np.ndarray) -> tuple[int, int]:
     if x.ndim < 2:
         raise ValueError("a 2-D transform needs at least two axes")
@@ -140,11 +148,7 @@ def _complex_2d(
     module = _pocketfft()
     if module is None:
         transform = _scipy_fft().fft2 if forward else _scipy_fft().ifft2
-        result = transform(x, workers=workers, overwrite_x=overwrite_x)
-        if out is None:
-            return result
-        out[...] = result
-        return out
+        return _written(transform(x, workers=workers, overwrite_x=overwrite_x), out)
     a = _as_float(x)
     if out is None and overwrite_x and a.dtype.kind == "c":
         out = a
@@ -172,11 +176,7 @@ def rfft2(x, *, workers: int = 1, out: np.ndarray | None = None) -> np.ndarray:
         _check_out(out, x.shape[:-1] + (x.shape[-1] // 2 + 1,), x.dtype)
     module = _pocketfft()
     if module is None:
-        result = _scipy_fft().rfft2(x, workers=workers)
-        if out is None:
-            return result
-        out[...] = result
-        return out
+        return _written(_scipy_fft().rfft2(x, workers=workers), out)
     a = _as_float(x)
     if a.dtype.kind == "c":
         raise TypeError("rfft2 needs a real array")
